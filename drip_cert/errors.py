@@ -1,0 +1,44 @@
+"""Domain exceptions of drip-cert.
+
+Every exception a user can provoke by a mistake in their input is a :class:`DripCertError`;
+the command line turns these into a message on stderr and exit status 2 (bad input) or 1
+(an assumption that fails, a design that is infeasible), never a traceback. Each subclass
+also subclasses the matching builtin so that generic ``except ValueError`` code keeps working.
+"""
+
+from __future__ import annotations
+
+
+class DripCertError(Exception):
+    """Base class of every error drip-cert raises on purpose."""
+
+
+class SpecError(DripCertError, ValueError):
+    """A specification (TOML file, Python arguments, data file) is malformed.
+
+    The message names the field (``section.key[index]``), the offending value and what is
+    allowed instead. The command line exits with status 2.
+    """
+
+    def __init__(self, message: str, *, field: str | None = None, path: str | None = None) -> None:
+        self.field = field
+        self.path = path
+        where = []
+        if path:
+            where.append(str(path))
+        if field:
+            where.append(field)
+        prefix = (": ".join(where) + ": ") if where else ""
+        super().__init__(prefix + message)
+
+
+class AssumptionViolation(DripCertError, ArithmeticError):
+    """An assumption of the papers fails for the given system (exit status 1)."""
+
+
+class InfeasibleDesign(DripCertError, ArithmeticError):
+    """No L1-DRAC design satisfies the paper's conditions with the given inputs (exit status 1)."""
+
+
+class SolverError(DripCertError, RuntimeError):
+    """A numerical solver failed or returned an answer that did not survive re-checking."""
