@@ -11,11 +11,11 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from enum import Enum
+from enum import StrEnum
 from typing import Any
 
 
-class How(str, Enum):
+class How(StrEnum):
     """How a number was obtained."""
 
     EXACT = "exact"  #: closed form, up to floating-point rounding

@@ -1,0 +1,263 @@
+"""Multi-layer perceptrons: the parameter pytree, evaluation, and the .npz/.json file format.
+
+File format (shared by learned policies and by opaque blocks such as the paper's h(x)):
+
+* ``NAME.npz`` (loaded with ``allow_pickle=False``): arrays ``W0, b0, W1, b1, ..., W{L-1}, b{L-1}``
+  with ``W_i`` of shape ``(out_i, in_i)`` and ``b_i`` of shape ``(out_i,)``. Layer ``i < L-1`` is
+  followed by the hidden activation; the last layer is affine, optionally followed by
+  ``output_activation``.
+* ``NAME.json`` (optional; architecture metadata): ``{"activation": "tanh",
+  "output_activation": null, "sizes": [in, h1, ..., out]}``. When absent the activation must be
+  given by the caller.
+
+Only smooth activations are offered (tanh, GELU, identity): the TaSIL certificate needs a
+Lipschitz Jacobian (math/tasil.md section 5).
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from drip_cert.errors import SpecError
+
+ACTIVATIONS = ("tanh", "gelu", "identity")
+
+
+@dataclass(frozen=True)
+class MLP:
+    """A fully connected network ``x -> W_{L-1} s(... s(W_0 x + b_0) ...) + b_{L-1}``.
+
+    Parameters
+    ----------
+    weights, biases
+        Tuples of numpy arrays, ``weights[i]`` of shape ``(out_i, in_i)``.
+    activation
+        Hidden activation, one of :data:`ACTIVATIONS`.
+    output_activation
+        Optional activation after the last layer (``None`` for affine output).
+    """
+
+    weights: tuple[np.ndarray, ...]
+    biases: tuple[np.ndarray, ...]
+    activation: str = "tanh"
+    output_activation: str | None = None
+
+    def __post_init__(self) -> None:
+        if len(self.weights) != len(self.biases) or not self.weights:
+            raise SpecError("an MLP needs as many bias vectors as weight matrices, at least one")
+        for act in (self.activation, self.output_activation):
+            if act is not None and act not in ACTIVATIONS:
+                raise SpecError(f"activation {act!r} is not one of {ACTIVATIONS}")
+        prev = None
+        ws, bs = [], []
+        for i, (w, b) in enumerate(zip(self.weights, self.biases, strict=True)):
+            w = np.asarray(w, dtype=np.float64)
+            b = np.asarray(b, dtype=np.float64)
+            if w.ndim != 2 or b.shape != (w.shape[0],):
+                raise SpecError(
+                    f"layer {i}: W{i} must be (out, in) and b{i} (out,), "
+                    f"got {w.shape} and {b.shape}"
+                )
+            if prev is not None and w.shape[1] != prev:
+                raise SpecError(
+                    f"layer {i}: W{i} expects {w.shape[1]} inputs but layer {i - 1} gives {prev}"
+                )
+            if not (np.all(np.isfinite(w)) and np.all(np.isfinite(b))):
+                raise SpecError(f"layer {i}: weights contain NaN or inf")
+            prev = w.shape[0]
+            w.setflags(write=False)
+            b.setflags(write=False)
+            ws.append(w)
+            bs.append(b)
+        object.__setattr__(self, "weights", tuple(ws))
+        object.__setattr__(self, "biases", tuple(bs))
+
+    @property
+    def in_dim(self) -> int:
+        return int(self.weights[0].shape[1])
+
+    @property
+    def out_dim(self) -> int:
+        return int(self.weights[-1].shape[0])
+
+    @property
+    def sizes(self) -> tuple[int, ...]:
+        return (self.in_dim, *(int(w.shape[0]) for w in self.weights))
+
+    @property
+    def n_params(self) -> int:
+        return int(sum(w.size + b.size for w, b in zip(self.weights, self.biases)))
+
+    def params(self) -> list[tuple[np.ndarray, np.ndarray]]:
+        """The parameter pytree ``[(W0, b0), ...]`` used by :func:`apply_params`."""
+        return [(w, b) for w, b in zip(self.weights, self.biases)]
+
+    def apply_np(self, x: np.ndarray) -> np.ndarray:
+        """Evaluate with numpy on ``x`` of shape ``(..., in_dim)``."""
+        return apply_params(
+            self.params(),
+            np.asarray(x, dtype=np.float64),
+            self.activation,
+            self.output_activation,
+            xp=np,
+        )
+
+    def apply_jax(self, x):
+        """Evaluate with jax.numpy on ``x`` of shape ``(..., in_dim)`` (traceable)."""
+        from drip_cert._jax import jnp
+
+        params = [(jnp.asarray(w), jnp.asarray(b)) for w, b in self.params()]
+        return apply_params(params, x, self.activation, self.output_activation, xp=jnp)
+
+    def save(self, path: str | Path) -> None:
+        """Write ``path`` (.npz) and the metadata ``path.with_suffix('.json')`` atomically."""
+        save_mlp(self, path)
+
+
+def activation_fn(name: str | None, xp):
+    """The activation ``name`` for the array module ``xp`` (numpy or jax.numpy)."""
+    if name is None or name == "identity":
+        return lambda z: z
+    if name == "tanh":
+        return xp.tanh
+    if name == "gelu":
+        # exact (erf) GELU: x * Phi(x); smooth, with bounded first and second derivatives
+        if xp is np:
+            from scipy.special import erf
+        else:
+            from jax.scipy.special import erf
+        return lambda z: 0.5 * z * (1.0 + erf(z / np.sqrt(2.0)))
+    raise SpecError(f"activation {name!r} is not one of {ACTIVATIONS}")
+
+
+def apply_params(params, x, activation: str, output_activation: str | None = None, xp=np):
+    """Forward pass of the parameter pytree ``[(W, b), ...]`` on ``x`` of shape ``(..., in)``."""
+    act = activation_fn(activation, xp)
+    h = x
+    last = len(params) - 1
+    for i, (w, b) in enumerate(params):
+        h = h @ w.T + b
+        if i < last:
+            h = act(h)
+    if output_activation is not None:
+        h = activation_fn(output_activation, xp)(h)
+    return h
+
+
+def init_mlp(
+    sizes: Sequence[int],
+    rng: np.random.Generator,
+    activation: str = "tanh",
+    output_activation: str | None = None,
+    scale: float = 1.0,
+) -> MLP:
+    """Random MLP with LeCun-normal weights (``scale / sqrt(fan_in)``) and zero biases."""
+    if len(sizes) < 2 or any(int(s) < 1 for s in sizes):
+        raise SpecError(f"MLP sizes must be >= 2 positive integers, got {list(sizes)}")
+    ws, bs = [], []
+    for fan_in, fan_out in zip(sizes[:-1], sizes[1:]):
+        ws.append(rng.normal(size=(fan_out, fan_in)) * scale / np.sqrt(fan_in))
+        bs.append(np.zeros(fan_out))
+    return MLP(tuple(ws), tuple(bs), activation, output_activation)
+
+
+def save_mlp(mlp: MLP, path: str | Path) -> None:
+    """Save ``mlp`` as ``path`` (.npz) plus ``.json`` metadata; each written atomically."""
+    path = Path(path)
+    arrays = {}
+    for i, (w, b) in enumerate(zip(mlp.weights, mlp.biases)):
+        arrays[f"W{i}"] = w
+        arrays[f"b{i}"] = b
+    meta = {
+        "activation": mlp.activation,
+        "output_activation": mlp.output_activation,
+        "sizes": list(mlp.sizes),
+    }
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(path.name + ".tmp.npz")
+    np.savez(tmp, **arrays)
+    tmp.replace(path)
+    jtmp = path.with_suffix(".json.tmp")
+    jtmp.write_text(json.dumps(meta, indent=2) + "\n")
+    jtmp.replace(path.with_suffix(".json"))
+
+
+def load_mlp(
+    path: str | Path,
+    activation: str | None = None,
+    output_activation: str | None = None,
+    expect_in: int | None = None,
+    expect_out: int | None = None,
+    field: str | None = None,
+) -> MLP:
+    """Load an MLP saved by :func:`save_mlp` (``allow_pickle=False``).
+
+    ``activation`` overrides the JSON metadata; one of the two must be present.
+    ``expect_in``/``expect_out`` check the declared shape. Every problem is a
+    :class:`~drip_cert.errors.SpecError` naming the file and what to fix.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise SpecError(f"weights file {str(path)!r} does not exist", field=field)
+    meta: dict = {}
+    mpath = path.with_suffix(".json")
+    if mpath.is_file():
+        try:
+            meta = json.loads(mpath.read_text())
+        except (OSError, ValueError) as exc:
+            raise SpecError(
+                f"metadata {str(mpath)!r} is not valid JSON: {exc}", field=field
+            ) from None
+        if not isinstance(meta, dict):
+            raise SpecError(f"metadata {str(mpath)!r} must be a JSON object", field=field)
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            files = dict(data.items())
+    except (OSError, ValueError) as exc:
+        raise SpecError(
+            f"cannot read weights file {str(path)!r} as .npz without pickles: {exc}", field=field
+        ) from None
+    n_layers = 0
+    while f"W{n_layers}" in files:
+        n_layers += 1
+    if n_layers == 0:
+        raise SpecError(
+            f"weights file {str(path)!r} has no array 'W0' (expected W0, b0, W1, b1, ...)",
+            field=field,
+        )
+    missing = [f"b{i}" for i in range(n_layers) if f"b{i}" not in files]
+    if missing:
+        raise SpecError(f"weights file {str(path)!r} lacks {missing}", field=field)
+    act = activation or meta.get("activation")
+    if act is None:
+        raise SpecError(
+            f"no activation for {str(path)!r}: give 'activation' or a .json file", field=field
+        )
+    out_act = output_activation if output_activation is not None else meta.get("output_activation")
+    try:
+        mlp = MLP(
+            tuple(files[f"W{i}"] for i in range(n_layers)),
+            tuple(files[f"b{i}"] for i in range(n_layers)),
+            act,
+            out_act,
+        )
+    except SpecError as exc:
+        raise SpecError(f"weights file {str(path)!r}: {exc}", field=field) from None
+    if expect_in is not None and mlp.in_dim != expect_in:
+        raise SpecError(
+            f"weights file {str(path)!r} takes {mlp.in_dim} inputs but the block "
+            f"declares {expect_in}",
+            field=field,
+        )
+    if expect_out is not None and mlp.out_dim != expect_out:
+        raise SpecError(
+            f"weights file {str(path)!r} gives {mlp.out_dim} outputs but the block "
+            f"declares {expect_out}",
+            field=field,
+        )
+    return mlp
