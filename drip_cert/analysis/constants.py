@@ -1,0 +1,308 @@
+"""Constants a :class:`~drip_cert.system.System` determines (DRIP Assumption 1, L1-DRAC
+Assumptions 1, 4, 6, 7).
+
+Each constant is a :class:`~drip_cert.provenance.Quantity` that records how it was obtained:
+
+* input operator ``g``: for a constant ``g`` every constant is exact (closed form up to
+  rounding); for a time-varying ``g`` the sup over ``t in [0, T]`` is a sampled estimate;
+* ``Theta_ad = [I_m 0] gbar^{-1}``: with ``g_perp`` an orthonormal basis of ``ker g^T`` this is
+  the pseudo-inverse ``(g^T g)^{-1} g^T`` (the matched part does not depend on the choice of
+  ``g_perp``), computed symbolically;
+* growth and regularity constants of the uncertainty (``Delta_mu``, ``Delta_sigma``, their
+  matched/unmatched parts of L1-DRAC (7), ``L_mu``, the 1/2-Hoelder ``L_sigma``): the paper asks
+  for bounds over all of ``R^n``. When an uncertainty depends on the state only through
+  ``r = ||x||`` (as in the paper's example), the supremum reduces to one dimension and is
+  computed soundly (see :mod:`drip_cert.analysis.radial`); otherwise it is a sampled estimate over
+  a large region, labelled ``estimate``, and the certificate lists it as such. A value the user
+  gives in the ``[constants]`` table is taken as given.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import sympy as sp
+
+from drip_cert.errors import SpecError
+from drip_cert.provenance import How, Quantity
+from drip_cert.system.system import System
+
+SAMPLE_RADII = (0.0, 0.1, 0.3, 1.0, 3.0, 10.0, 30.0, 100.0, 1e3, 1e4, 1e6)
+#: radii at which growth ratios are sampled; 1e6 stands in for the limit r -> infinity
+SAMPLES_PER_RADIUS = 256  #: random directions per radius for sampled estimates
+SAMPLE_SEED = 20260101  #: fixed seed of the sampled estimates (reproducible reports)
+
+
+def theta_ad_symbolic(s: System) -> sp.ImmutableMatrix:
+    """``Theta_ad(t) = [I_m 0] gbar(t)^{-1} = (g^T g)^{-1} g^T`` (L1-DRAC Assumption 1).
+
+    With ``gbar = [g, g_perp]`` and ``Im g_perp = ker g^T``, any ``v = g a + g_perp b`` has
+    ``g^T v = g^T g a``, so the first m rows of ``gbar^{-1}`` are the pseudo-inverse of ``g``
+    whatever basis ``g_perp`` is chosen.
+    """
+    g = sp.Matrix(s.g)
+    gtg = g.T * g
+    inv = gtg.inv() if s.g_is_constant else sp.simplify(gtg.inv())
+    return sp.ImmutableMatrix(sp.simplify(inv * g.T))
+
+
+def g_perp_at(s: System, t: float = 0.0) -> np.ndarray:
+    """Orthonormal basis of ``ker g(t)^T`` (n x (n-m)), from the SVD of ``g(t)``."""
+    G = s.g_at(t)
+    u, _, _ = np.linalg.svd(G, full_matrices=True)
+    return u[:, s.m:]
+
+
+@dataclass(frozen=True)
+class InputConstants:
+    """Constants of the input operator (DRIP Assumption 1, L1-DRAC Assumption 1)."""
+
+    Delta_g: Quantity  #: sup_t ||g(t)||_F (the paper's)
+    Delta_g_spectral: Quantity  #: sup_t ||g(t)||_2 (tighter; used by the comparison bound)
+    Delta_g_dot: Quantity  #: sup_t ||g'(t)||_F
+    Delta_g_perp: Quantity  #: ||g_perp||_F = sqrt(n - m) for orthonormal g_perp
+    Delta_Theta: Quantity  #: sup_t ||Theta_ad(t)||_F
+    rank: int
+    min_singular_value: float
+    g_perp: tuple[tuple[float, ...], ...]  #: at t = 0
+    theta_ad: tuple[tuple[float, ...], ...]  #: at t = 0
+
+    def quantities(self) -> tuple[Quantity, ...]:
+        return (self.Delta_g, self.Delta_g_spectral, self.Delta_g_dot, self.Delta_g_perp,
+                self.Delta_Theta)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            **{q.name: q.to_dict() for q in self.quantities()},
+            "rank": self.rank,
+            "min_singular_value": self.min_singular_value,
+            "g_perp": [list(r) for r in self.g_perp],
+            "theta_ad": [list(r) for r in self.theta_ad],
+        }
+
+
+def input_constants(s: System) -> InputConstants:
+    """Compute :class:`InputConstants`.
+
+    Exact for a constant ``g``; for a time-varying ``g`` the suprema over ``[0, T]`` are taken
+    on a grid of 4097 points and labelled ``estimate``.
+    """
+    th = theta_ad_symbolic(s)
+    gdot = sp.Matrix(s.g).diff(s.t)
+    times = s.rank_check_times() if s.g_is_constant else np.linspace(0.0, s.horizon, 4097)
+    how = How.EXACT if s.g_is_constant else How.ESTIMATE
+    scope = "constant g" if s.g_is_constant else f"sup over a 4097-point grid of [0, {s.horizon}]"
+    fro, spec, dot, tnorm, smin = 0.0, 0.0, 0.0, 0.0, math.inf
+    for tt in times:
+        G = s.g_at(tt)
+        sv = np.linalg.svd(G, compute_uv=False)
+        fro = max(fro, float(np.linalg.norm(G, "fro")))
+        spec = max(spec, float(sv[0]))
+        smin = min(smin, float(sv[-1]))
+        D = np.array(gdot.subs(s.t, tt).evalf(), dtype=float)
+        dot = max(dot, float(np.linalg.norm(D, "fro")))
+        TH = np.array(th.subs(s.t, tt).evalf(), dtype=float)
+        tnorm = max(tnorm, float(np.linalg.norm(TH, "fro")))
+    n, m = s.n, s.m
+    gp = g_perp_at(s, 0.0)
+    th0 = np.array(th.subs(s.t, 0.0).evalf(), dtype=float)
+    return InputConstants(
+        Delta_g=Quantity("Delta_g", fro, how, "DRIP Assumption 1 (Frobenius)", scope),
+        Delta_g_spectral=Quantity("Delta_g_spectral", spec, how,
+                                  "spectral-norm bound of g (this project)", scope),
+        Delta_g_dot=Quantity("Delta_g_dot", dot, how, "L1-DRAC Assumption 1", scope),
+        Delta_g_perp=Quantity("Delta_g_perp", math.sqrt(n - m), How.EXACT,
+                              "L1-DRAC Assumption 1", "orthonormal g_perp: ||g_perp||_F = "
+                              "sqrt(n - m)"),
+        Delta_Theta=Quantity("Delta_Theta", tnorm, how, "L1-DRAC Assumption 1",
+                             "Theta_ad = (g^T g)^{-1} g^T; " + scope),
+        rank=int(m if smin > 0 else 0),
+        min_singular_value=smin,
+        g_perp=tuple(tuple(float(v) for v in row) for row in gp),
+        theta_ad=tuple(tuple(float(v) for v in row) for row in th0),
+    )
+
+
+# ---------------------------------------------------------------------- sampled sup estimates
+def _directions(n: int, k: int, rng: np.random.Generator) -> np.ndarray:
+    v = rng.normal(size=(k, n))
+    v /= np.linalg.norm(v, axis=1, keepdims=True)
+    return v
+
+
+def sample_points(n: int, center: np.ndarray | None = None, seed: int = SAMPLE_SEED) -> np.ndarray:
+    """Points on spheres of radii :data:`SAMPLE_RADII` (plus the origin and the center)."""
+    rng = np.random.default_rng(seed)
+    pts = [np.zeros((1, n))]
+    for r in SAMPLE_RADII[1:]:
+        pts.append(r * _directions(n, SAMPLES_PER_RADIUS, rng))
+    if center is not None:
+        pts.append(center[None, :])
+    return np.concatenate(pts)
+
+
+def growth_ratio_estimate(fn: Callable[[np.ndarray], np.ndarray], n: int, power: float,
+                          times: np.ndarray, seed: int = SAMPLE_SEED) -> tuple[float, np.ndarray]:
+    """Sampled ``sup ||fn(t, a)|| / (1 + ||a||^2)^{power/2}`` and the maximiser.
+
+    ``power = 1`` is the drift form ``||F||^2 <= D^2 (1 + ||a||^2)``; ``power = 1/2`` is the
+    diffusion form ``||F||_F^2 <= D^2 (1 + ||a||^2)^{1/2}`` of L1-DRAC Assumption 4.
+    """
+    X = sample_points(n, seed=seed)
+    best, arg = 0.0, X[0]
+    for tt in times:
+        vals = fn(float(tt), X)
+        norms = np.linalg.norm(vals.reshape(len(X), -1), axis=1)
+        ratio = norms / (1.0 + np.sum(X**2, axis=1)) ** (power / 2.0)
+        i = int(np.nanargmax(ratio))
+        if ratio[i] > best:
+            best, arg = float(ratio[i]), X[i]
+    return best, arg
+
+
+def holder_estimate(fn: Callable[[np.ndarray], np.ndarray], n: int, exponent: float,
+                    times: np.ndarray, seed: int = SAMPLE_SEED) -> float:
+    """Sampled ``sup ||fn(t,a) - fn(t,b)|| / ||a - b||^exponent`` over pairs at many scales."""
+    rng = np.random.default_rng(seed + 1)
+    A = sample_points(n, seed=seed)
+    best = 0.0
+    for scale in (1e-4, 1e-2, 1e-1, 1.0, 10.0, 100.0):
+        B = A + scale * _directions(n, len(A), rng)
+        # pairs through the origin: the 1/2-Hoelder ratio of sqrt-type terms peaks there
+        B0 = np.zeros_like(A)
+        for P, Q in ((A, B), (B0, B)):
+            dist = np.linalg.norm(P - Q, axis=1)
+            ok = dist > 0
+            for tt in times:
+                diff = fn(float(tt), P) - fn(float(tt), Q)
+                num = np.linalg.norm(diff.reshape(len(P), -1), axis=1)
+                r = num[ok] / dist[ok] ** exponent
+                if r.size:
+                    best = max(best, float(np.nanmax(r)))
+    return best
+
+
+def batch_fn(s: System, exprs: sp.MatrixBase) -> Callable[[float, np.ndarray], np.ndarray]:
+    """numpy-facing batched evaluation ``(t, X (N, n)) -> (N, ...)`` of system expressions."""
+    from drip_cert._jax import jax, jnp
+
+    fn = jax.jit(jax.vmap(s.lower(exprs), in_axes=(None, 0)))
+
+    def call(tt: float, X: np.ndarray) -> np.ndarray:
+        return np.asarray(fn(jnp.float64(tt), jnp.asarray(X, dtype=jnp.float64)))
+
+    return call
+
+
+@dataclass(frozen=True)
+class UncertaintyConstants:
+    """Growth and regularity constants of the uncertainty (DRIP Assumption 1, L1-DRAC
+    Assumptions 4 and 6) and of the known diffusion (L1-DRAC Assumptions 1 and 5)."""
+
+    values: Mapping[str, Quantity]
+
+    def __getitem__(self, key: str) -> Quantity:
+        return self.values[key]
+
+    def to_dict(self) -> dict[str, Any]:
+        return {k: q.to_dict() for k, q in self.values.items()}
+
+
+def uncertainty_constants(
+    s: System, given: Mapping[str, Any] | None = None
+) -> UncertaintyConstants:
+    """Estimate (or take as given) the uncertainty and diffusion constants.
+
+    Parameters
+    ----------
+    s
+        The system.
+    given
+        The spec's ``[constants]`` table; any key there overrides the computed value and is
+        labelled ``given``.
+    """
+    given = dict(given or {})
+    n, m = s.n, s.m
+    times = np.array([0.0]) if not _depends_on_t(s) else np.linspace(0.0, s.horizon, 9)
+    how_t = "" if len(times) == 1 else f"; t sampled at 9 points of [0, {s.horizon}]"
+    th = theta_ad_symbolic(s)
+    gp = g_perp_at(s, 0.0)
+    out: dict[str, Quantity] = {}
+    note = ("sampled over spheres of radii " + ", ".join(f"{r:g}" for r in SAMPLE_RADII)
+            + f" ({SAMPLES_PER_RADIUS} directions each, seed {SAMPLE_SEED}); the paper asks for a "
+            "bound over all x: this is an estimate, not a bound" + how_t)
+
+    def put(name: str, value: float, how: How, source: str, nt: str) -> None:
+        if name in given:
+            out[name] = Quantity(name, _given_float(given[name], name), How.GIVEN, source,
+                                 "given in [constants]")
+        else:
+            out[name] = Quantity(name, value, how, source, nt)
+
+    parts: dict[str, tuple[sp.MatrixBase | None, float, float | None]] = {
+        "mu": (s.lambda_mu, 1.0, s.Delta_mu),
+        "sigma": (s.lambda_sigma, 0.5, s.Delta_sigma),
+        "p": (s.diffusion if any(e != 0 for e in s.diffusion) else None, 0.5, 0.0),
+    }
+    for key, (mat, power, given_bound) in parts.items():
+        growth_src = {"mu": "DRIP Assumption 1 / L1-DRAC Assumption 4",
+                      "sigma": "DRIP Assumption 1 / L1-DRAC Assumption 4",
+                      "p": "L1-DRAC Assumption 1"}[key]
+        lip_src = {"mu": "L1-DRAC Assumption 6", "sigma": "L1-DRAC Assumption 6",
+                   "p": "L1-DRAC Assumptions 1, 5"}[key]
+        lip_exp = 1.0 if key == "mu" else 0.5
+        if mat is None:
+            if given_bound is not None and key != "p":
+                # only the bound is known: matched/unmatched parts bounded through the norms of
+                # Theta_ad and g_perp^T (||Theta Lambda|| <= ||Theta||_2 ||Lambda||)
+                thn = float(np.linalg.norm(np.array(th.subs(s.t, 0.0).evalf(), dtype=float), 2))
+                put(f"Delta_{key}", given_bound, How.GIVEN, growth_src, "given in [uncertainty]")
+                put(f"Delta_{key}_par", thn * given_bound, How.SOUND, growth_src + " / (7)",
+                    "||Theta_ad||_2 * Delta (only the bound is known)")
+                put(f"Delta_{key}_perp", given_bound if n > m else 0.0, How.SOUND,
+                    growth_src + " / (7)", "||g_perp^T||_2 = 1 times Delta")
+                for sub in ("", "_par", "_perp"):
+                    if f"L_{key}{sub}" in given:
+                        put(f"L_{key}{sub}", 0.0, How.GIVEN, lip_src, "")
+                    else:
+                        out[f"L_{key}{sub}"] = Quantity(
+                            f"L_{key}{sub}", math.nan, How.ESTIMATE, lip_src,
+                            "unknown: only Delta is given; give it in [constants]")
+                continue
+            for sub in ("", "_par", "_perp"):
+                put(f"Delta_{key}{sub}", 0.0, How.EXACT, growth_src, "no such term")
+                put(f"L_{key}{sub}", 0.0, How.EXACT, lip_src, "no such term")
+            continue
+        full = sp.Matrix(mat)
+        par = sp.Matrix(th) * full
+        perp = sp.Matrix(gp.T) * full if n > m else None
+        for sub, expr in (("", full), ("_par", par), ("_perp", perp)):
+            if expr is None:
+                put(f"Delta_{key}{sub}", 0.0, How.EXACT, growth_src + " / (7)", "m = n: no "
+                    "unmatched part")
+                put(f"L_{key}{sub}", 0.0, How.EXACT, lip_src, "m = n: no unmatched part")
+                continue
+            fn = batch_fn(s, expr)
+            D, _ = growth_ratio_estimate(fn, n, power, times)
+            L = holder_estimate(fn, n, lip_exp, times)
+            put(f"Delta_{key}{sub}", D, How.ESTIMATE, growth_src + (" / (7)" if sub else ""),
+                note)
+            put(f"L_{key}{sub}", L, How.ESTIMATE, lip_src,
+                ("Lipschitz" if lip_exp == 1 else "1/2-Hoelder") + " ratio " + note)
+    return UncertaintyConstants(values=out)
+
+
+def _depends_on_t(s: System) -> bool:
+    mats = [s.diffusion, s.lambda_mu, s.lambda_sigma, s.g]
+    return any(s.t in e.free_symbols for mat in mats if mat is not None for e in mat)
+
+
+def _given_float(v: Any, name: str) -> float:
+    if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(float(v)) \
+            or float(v) < 0:
+        raise SpecError(f"must be a finite number >= 0, got {v!r}", field=f"constants.{name}")
+    return float(v)

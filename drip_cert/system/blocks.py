@@ -1,0 +1,168 @@
+"""Blocks: learned or opaque vector functions (neural networks) usable inside expressions.
+
+A block is a named map ``R^k -> R^q`` with a jax implementation; its Jacobian and Hessian come
+from jax autodiff. Inside sympy expressions component ``j`` of block ``h`` applied to arguments
+``a_1..a_k`` is the applied function ``h__0(a_1, ..., a_k)``, an instance of a
+:class:`BlockFunction` subclass made for that block. Differentiating it gives the
+applied Jacobian entry ``h__d0_1(...)``, and once more the Hessian entry ``h__dd0_1_2(...)``,
+so sympy's chain rule builds closed-loop Jacobians that contain blocks, and
+:mod:`drip_cert.system.lower` turns them into jax functions that evaluate each block once.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import sympy as sp
+
+from drip_cert.errors import SpecError
+from drip_cert.learn.mlp import MLP, load_mlp
+
+
+class BlockFunction(sp.Function):
+    """Base class of the sympy functions standing for block components and derivatives.
+
+    Class attributes set per subclass: ``block_name`` (str), ``out_index`` (int) and
+    ``deriv`` (tuple of input indices: ``()`` value, ``(i,)`` Jacobian entry, ``(i, l)``
+    Hessian entry).
+    """
+
+    block_name: str = ""
+    out_index: int = 0
+    deriv: tuple[int, ...] = ()
+    _family: dict | None = None
+
+    def fdiff(self, argindex: int = 1) -> sp.Expr:  # noqa: D401 (sympy API)
+        """Partial derivative with respect to argument ``argindex`` (1-based)."""
+        i = argindex - 1
+        key = (self.out_index, tuple(sorted((*self.deriv, i))))
+        fam = type(self)._family
+        if fam is None or key not in fam:
+            raise SpecError(
+                f"derivatives of order {len(self.deriv) + 1} of block '{self.block_name}' are not "
+                "available (drip-cert uses block values, Jacobians and Hessians only)"
+            )
+        return fam[key](*self.args)
+
+
+def _make_family(name: str, in_dim: int, out_dim: int) -> dict[tuple[int, tuple[int, ...]], type]:
+    """Create the sympy function classes of one block (values, Jacobian, Hessian entries)."""
+    fam: dict[tuple[int, tuple[int, ...]], type] = {}
+    for j in range(out_dim):
+        keys: list[tuple[int, ...]] = [()]
+        keys += [(i,) for i in range(in_dim)]
+        keys += [(i, l) for i in range(in_dim) for l in range(i, in_dim)]
+        for d in keys:
+            if not d:
+                cname = f"{name}__{j}"
+            elif len(d) == 1:
+                cname = f"{name}__d{j}_{d[0]}"
+            else:
+                cname = f"{name}__dd{j}_{d[0]}_{d[1]}"
+            cls = type(
+                cname,
+                (BlockFunction,),
+                {"block_name": name, "out_index": j, "deriv": d, "nargs": in_dim},
+            )
+            fam[(j, d)] = cls
+    for cls in fam.values():
+        cls._family = fam
+    return fam
+
+
+@dataclass(frozen=True, eq=False)
+class Block:
+    """A named vector function usable in expressions as ``name(args)[j]``.
+
+    Parameters
+    ----------
+    name
+        Identifier used in expressions.
+    in_dim, out_dim
+        Argument and output dimensions.
+    fn
+        jax-traceable map from an array of shape ``(in_dim,)`` to ``(out_dim,)``.
+    mlp
+        The network, when the block is an MLP (enables sound bounds in the analysis).
+    source
+        Where it came from (weights file), for reports.
+    """
+
+    name: str
+    in_dim: int
+    out_dim: int
+    fn: Callable[[Any], Any]
+    mlp: MLP | None = None
+    source: str = ""
+    family: Mapping[tuple[int, tuple[int, ...]], type] = field(init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        if not self.name.isidentifier() or self.name.startswith("_") or "__" in self.name:
+            raise SpecError(
+                f"block name {self.name!r} must be an identifier without leading '_' or '__'"
+            )
+        if int(self.in_dim) < 1 or int(self.out_dim) < 1:
+            raise SpecError(f"block '{self.name}': inputs and outputs must be >= 1")
+        object.__setattr__(self, "family", _make_family(self.name, self.in_dim, self.out_dim))
+
+    def component(self, j: int) -> type:
+        """The sympy function class of output component ``j``."""
+        return self.family[(j, ())]
+
+    def jacobian_fn(self) -> Callable[[Any], Any]:
+        """jax map ``z -> d fn / dz`` of shape ``(out_dim, in_dim)``."""
+        from drip_cert._jax import jax
+
+        return jax.jacfwd(self.fn)
+
+    def hessian_fn(self) -> Callable[[Any], Any]:
+        """jax map ``z -> d^2 fn / dz^2`` of shape ``(out_dim, in_dim, in_dim)``."""
+        from drip_cert._jax import jax
+
+        return jax.jacfwd(jax.jacrev(self.fn))
+
+    def evaluate_np(self, z: np.ndarray) -> np.ndarray:
+        """Evaluate on a batch ``(N, in_dim)`` (or one point) and return numpy."""
+        from drip_cert._jax import jax, jnp
+
+        z = jnp.asarray(z, dtype=jnp.float64)
+        if z.ndim == 1:
+            return np.asarray(self.fn(z))
+        return np.asarray(jax.vmap(self.fn)(z))
+
+    def to_dict(self) -> dict[str, Any]:
+        out: dict[str, Any] = {"name": self.name, "inputs": self.in_dim, "outputs": self.out_dim}
+        if self.mlp is not None:
+            out.update(kind="mlp", sizes=list(self.mlp.sizes), activation=self.mlp.activation)
+        if self.source:
+            out["source"] = self.source
+        return out
+
+
+def mlp_block(name: str, mlp: MLP, source: str = "") -> Block:
+    """Wrap an :class:`~drip_cert.learn.mlp.MLP` as a block."""
+    return Block(name=name, in_dim=mlp.in_dim, out_dim=mlp.out_dim, fn=mlp.apply_jax, mlp=mlp,
+                 source=source)
+
+
+def load_mlp_block(
+    name: str,
+    weights: str | Path,
+    inputs: int,
+    outputs: int,
+    activation: str | None = None,
+    field: str | None = None,
+) -> Block:
+    """Load an MLP block from ``weights`` (.npz, ``allow_pickle=False``), checking its shape."""
+    mlp = load_mlp(weights, activation=activation, expect_in=inputs, expect_out=outputs,
+                   field=field)
+    return mlp_block(name, mlp, source=str(weights))
+
+
+def block_applications(expr: sp.Basic) -> set[BlockFunction]:
+    """All applied block functions occurring in ``expr``."""
+    return {a for a in expr.atoms(sp.Function) if isinstance(a, BlockFunction)}

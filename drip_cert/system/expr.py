@@ -1,0 +1,273 @@
+"""Safe parsing of user expressions into sympy, by a whitelist over Python's ``ast``.
+
+A specification file must never be able to run code, so user text is never given to ``eval``,
+``sympify`` or ``parse_expr``. :func:`parse_expression` walks the syntax tree and accepts only
+
+* numbers (int and float literals; floats become exact rationals of their decimal text),
+* the declared scalar symbols (states, time) and the constants ``pi`` and ``E``,
+* ``+ - * / **`` and unary ``-``/``+``,
+* calls of :data:`FUNCTIONS` (``norm`` takes the state vector name or scalars),
+* calls of declared blocks, ``h(x)[j]`` or ``h(x1, x2)[j]`` (index optional for one output),
+  where the vector name of the state (``x`` unless a scalar state is called ``x``) expands to
+  all states.
+
+Everything else (attribute access, lambda, comprehensions, subscripts on non-blocks, keyword
+arguments, strings, names starting with ``_``) is a :class:`~drip_cert.errors.SpecError`
+that names the field, the offending text and what is allowed.
+"""
+
+from __future__ import annotations
+
+import ast
+from collections.abc import Mapping, Sequence
+
+import sympy as sp
+
+from drip_cert.errors import SpecError
+from drip_cert.system.blocks import Block
+
+#: Elementary functions accepted in expressions, with their sympy counterparts.
+FUNCTIONS: Mapping[str, object] = {
+    "sin": sp.sin,
+    "cos": sp.cos,
+    "tan": sp.tan,
+    "exp": sp.exp,
+    "log": sp.log,
+    "sqrt": sp.sqrt,
+    "tanh": sp.tanh,
+    "abs": sp.Abs,
+    "Abs": sp.Abs,
+    "Max": sp.Max,
+    "Min": sp.Min,
+}
+_UNARY = ("sin", "cos", "tan", "exp", "log", "sqrt", "tanh", "abs", "Abs")
+CONSTANTS: Mapping[str, sp.Expr] = {"pi": sp.pi, "E": sp.E}
+MAX_LENGTH = 20_000  #: longest expression text accepted (guards the parser's recursion)
+_ALLOWED_HELP = (
+    "allowed: numbers, the declared symbols {symbols}, + - * / **, unary minus, "
+    "the functions " + ", ".join(FUNCTIONS) + ", norm(x), pi, E{blocks}"
+)
+
+
+def parse_expression(
+    text: object,
+    *,
+    field: str,
+    scalars: Mapping[str, sp.Symbol],
+    vector_name: str | None = "x",
+    vector: Sequence[sp.Symbol] = (),
+    blocks: Mapping[str, Block] | None = None,
+    path: str | None = None,
+) -> sp.Expr:
+    """Parse one user expression into a sympy expression, safely.
+
+    Parameters
+    ----------
+    text
+        The expression text (a number is accepted too).
+    field
+        Where it came from, e.g. ``"dynamics.f[1]"``; used in error messages.
+    scalars
+        Declared scalar names and their symbols (states, time).
+    vector_name, vector
+        Name of the state vector and its components, usable in ``norm(x)`` and block calls.
+    blocks
+        Declared blocks by name.
+    path
+        The specification file, for error messages.
+
+    Raises
+    ------
+    SpecError
+        For anything outside the whitelist; nothing is evaluated.
+    """
+    blocks = dict(blocks or {})
+    if isinstance(text, bool):
+        raise SpecError(f"expected an expression, got the boolean {text!r}", field=field, path=path)
+    if isinstance(text, int | float):
+        text = repr(text)
+    if not isinstance(text, str):
+        raise SpecError(
+            f"expected an expression string, got {type(text).__name__} {text!r}",
+            field=field,
+            path=path,
+        )
+    if not text.strip():
+        raise SpecError("empty expression", field=field, path=path)
+    if len(text) > MAX_LENGTH:
+        raise SpecError(f"expression longer than {MAX_LENGTH} characters", field=field, path=path)
+    try:
+        tree = ast.parse(text.strip(), mode="eval")
+    except (SyntaxError, ValueError, RecursionError, MemoryError) as exc:
+        msg = getattr(exc, "msg", None) or type(exc).__name__
+        raise SpecError(f"cannot parse {text!r}: {msg}", field=field, path=path) from None
+    parser = _Parser(text, field, path, dict(scalars), vector_name, tuple(vector), blocks)
+    try:
+        out = parser.visit(tree.body)
+    except RecursionError:
+        raise SpecError(f"expression {text!r} is nested too deeply", field=field,
+                        path=path) from None
+    if not isinstance(out, sp.Expr):
+        raise SpecError(
+            f"{text!r} is a vector; use it only inside norm(...) or a block call",
+            field=field,
+            path=path,
+        )
+    return out
+
+
+class _Parser:
+    """Recursive walk over an expression AST that builds sympy objects."""
+
+    def __init__(self, text, field, path, scalars, vector_name, vector, blocks):
+        self.text = text
+        self.field = field
+        self.path = path
+        self.scalars = scalars
+        self.vector_name = vector_name if vector else None
+        self.vector = vector
+        self.blocks = blocks
+
+    def fail(self, what: str) -> SpecError:
+        names = ", ".join(sorted(self.scalars)) or "(none)"
+        blk = ""
+        if self.blocks:
+            blk = ", blocks " + ", ".join(f"{b}(...)[j]" for b in sorted(self.blocks))
+        if self.vector_name:
+            names += f", {self.vector_name} (the state vector, in norm() and block calls)"
+        return SpecError(
+            f"{what} in {self.text!r}; " + _ALLOWED_HELP.format(symbols=names, blocks=blk),
+            field=self.field,
+            path=self.path,
+        )
+
+    def visit(self, node: ast.AST):
+        method = getattr(self, "visit_" + type(node).__name__, None)
+        if method is None:
+            raise self.fail(f"'{_describe(node)}' is not allowed")
+        return method(node)
+
+    def visit_Constant(self, node: ast.Constant):
+        v = node.value
+        if isinstance(v, bool) or not isinstance(v, int | float):
+            raise self.fail(f"the literal {v!r} is not a number")
+        if isinstance(v, float):
+            if v != v or v in (float("inf"), float("-inf")):
+                raise self.fail("NaN or infinite literal")
+            return sp.Rational(repr(v))
+        return sp.Integer(v)
+
+    def visit_Name(self, node: ast.Name):
+        name = node.id
+        if name.startswith("_"):
+            raise self.fail(f"the name {name!r} (names starting with '_' are not allowed)")
+        if name in self.scalars:
+            return self.scalars[name]
+        if self.vector_name and name == self.vector_name:
+            return list(self.vector)
+        if name in CONSTANTS:
+            return CONSTANTS[name]
+        if name in FUNCTIONS or name == "norm" or name in self.blocks:
+            raise self.fail(f"the function {name!r} must be called")
+        raise self.fail(f"unknown symbol {name!r}")
+
+    def visit_UnaryOp(self, node: ast.UnaryOp):
+        operand = self._scalar(node.operand)
+        if isinstance(node.op, ast.USub):
+            return -operand
+        if isinstance(node.op, ast.UAdd):
+            return operand
+        raise self.fail(f"the operator '{_describe(node)}' is not allowed")
+
+    def visit_BinOp(self, node: ast.BinOp):
+        a = self._scalar(node.left)
+        b = self._scalar(node.right)
+        op = node.op
+        if isinstance(op, ast.Add):
+            return a + b
+        if isinstance(op, ast.Sub):
+            return a - b
+        if isinstance(op, ast.Mult):
+            return a * b
+        if isinstance(op, ast.Div):
+            if b == 0:
+                raise self.fail("division by zero")
+            return a / b
+        if isinstance(op, ast.Pow):
+            return a**b
+        raise self.fail(f"the operator {type(op).__name__} is not allowed")
+
+    def visit_Call(self, node: ast.Call):
+        return self._call(node, index=None)
+
+    def visit_Subscript(self, node: ast.Subscript):
+        if not (isinstance(node.value, ast.Call) and isinstance(node.value.func, ast.Name)
+                and node.value.func.id in self.blocks):
+            raise self.fail("subscripts are allowed only on block calls, as h(x)[0]")
+        sl = node.slice
+        if not (isinstance(sl, ast.Constant) and isinstance(sl.value, int)
+                and not isinstance(sl.value, bool)):
+            raise self.fail("a block output index must be a non-negative integer literal")
+        return self._call(node.value, index=sl.value)
+
+    def _scalar(self, node: ast.AST) -> sp.Expr:
+        v = self.visit(node)
+        if isinstance(v, list):
+            raise self.fail("the state vector can be used only inside norm() or a block call")
+        return v
+
+    def _args(self, node: ast.Call) -> list[sp.Expr]:
+        out: list[sp.Expr] = []
+        for a in node.args:
+            if isinstance(a, ast.Starred):
+                raise self.fail("starred arguments are not allowed")
+            v = self.visit(a)
+            out.extend(v if isinstance(v, list) else [v])
+        return out
+
+    def _call(self, node: ast.Call, index: int | None):
+        if not isinstance(node.func, ast.Name):
+            raise self.fail(f"'{_describe(node.func)}' cannot be called")
+        if node.keywords:
+            raise self.fail("keyword arguments are not allowed")
+        name = node.func.id
+        if name in self.blocks:
+            block = self.blocks[name]
+            args = self._args(node)
+            if len(args) != block.in_dim:
+                raise self.fail(
+                    f"block {name!r} takes {block.in_dim} inputs but {len(args)} were given"
+                )
+            if index is None:
+                if block.out_dim != 1:
+                    raise self.fail(
+                        f"block {name!r} has {block.out_dim} outputs: pick one as {name}(...)[j]"
+                    )
+                index = 0
+            if not 0 <= index < block.out_dim:
+                raise self.fail(
+                    f"output index {index} of block {name!r} is out of range 0..{block.out_dim - 1}"
+                )
+            return block.component(index)(*args)
+        if index is not None:
+            raise self.fail("subscripts are allowed only on block calls")
+        if name == "norm":
+            args = self._args(node)
+            if not args:
+                raise self.fail("norm() needs an argument")
+            return sp.sqrt(sum(a**2 for a in args))
+        if name not in FUNCTIONS:
+            raise self.fail(f"unknown function {name!r}")
+        args = [self._scalar(a) for a in node.args]
+        if name in _UNARY and len(args) != 1:
+            raise self.fail(f"{name}() takes exactly one argument")
+        if name in ("Max", "Min") and len(args) < 2:
+            raise self.fail(f"{name}() takes at least two arguments")
+        return FUNCTIONS[name](*args)
+
+
+def _describe(node: ast.AST) -> str:
+    try:
+        return ast.unparse(node)
+    except Exception:  # pragma: no cover - unparse handles every node parse produced
+        return type(node).__name__

@@ -1,0 +1,287 @@
+"""TOML specifications: :func:`load_spec` reads a file into a :class:`Spec` (a System + settings).
+
+The format (documented in the README) has the sections ``[system]``, ``[dynamics]``,
+``[policy]``, ``[blocks.NAME]``, ``[uncertainty]``, ``[initial]``, and the optional settings
+tables ``[constants]`` (user-given values of paper constants), ``[contraction]``,
+``[l1drac]``, ``[tasil]`` and ``[simulation]``, each validated by the module that uses it.
+Every problem is a :class:`~drip_cert.errors.SpecError` naming the file, the field and the fix.
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from types import MappingProxyType
+from typing import Any
+
+import sympy as sp
+
+from drip_cert.errors import SpecError
+from drip_cert.system.blocks import Block, load_mlp_block
+from drip_cert.system.expr import CONSTANTS, FUNCTIONS, parse_expression
+from drip_cert.system.system import System
+
+SECTIONS = {
+    "system": {"name", "states", "inputs", "horizon", "time", "brownian_dim"},
+    "dynamics": {"f", "g", "diffusion"},
+    "policy": {"expert", "learned"},
+    "blocks": None,  # table of tables, checked per block
+    "uncertainty": {"drift", "diffusion", "Delta_mu", "Delta_sigma"},
+    "initial": {"support", "true_support"},
+    "constants": None,  # checked by drip_cert.analysis.constants
+    "contraction": None,  # checked by drip_cert.analysis.contraction
+    "l1drac": None,  # checked by drip_cert.bounds.l1drac
+    "tasil": None,  # checked by drip_cert.bounds.tasil / drip_cert.learn
+    "simulation": None,  # checked by drip_cert.sim
+}
+BLOCK_KEYS = {"kind", "weights", "inputs", "outputs", "activation"}
+REQUIRED = {"system": {"name", "states", "horizon"}, "dynamics": {"f", "g"},
+            "policy": {"expert"}, "initial": {"support"}}
+
+
+@dataclass(frozen=True, eq=False)
+class Spec:
+    """A loaded specification: the :class:`System` plus the raw settings tables."""
+
+    path: Path | None
+    system: System
+    tables: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)
+
+    def table(self, name: str) -> Mapping[str, Any]:
+        """A settings table (``constants``, ``contraction``, ``l1drac``, ``tasil``,
+        ``simulation``); empty when absent."""
+        return self.tables.get(name, MappingProxyType({}))
+
+    @property
+    def base_dir(self) -> Path:
+        return self.path.parent if self.path is not None else Path.cwd()
+
+
+def load_spec(path: str | Path) -> Spec:
+    """Load and validate a TOML specification.
+
+    Parameters
+    ----------
+    path
+        The ``.toml`` file. Relative paths inside it (weights files) are relative to its folder.
+
+    Raises
+    ------
+    SpecError
+        Naming the file, the field, the offending value and what is allowed.
+    """
+    path = Path(path)
+    spath = str(path)
+    if not path.is_file():
+        raise SpecError(f"specification file {spath!r} does not exist")
+    try:
+        with path.open("rb") as fh:
+            doc = tomllib.load(fh)
+    except tomllib.TOMLDecodeError as exc:
+        raise SpecError(f"not valid TOML: {exc}", path=spath) from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise SpecError(f"cannot read the file: {exc}", path=spath) from None
+    return spec_from_dict(doc, path=path)
+
+
+def spec_from_dict(doc: Mapping[str, Any], path: Path | None = None) -> Spec:
+    """Build a :class:`Spec` from an already parsed TOML document."""
+    spath = None if path is None else str(path)
+    base = path.parent if path is not None else Path.cwd()
+
+    def err(msg: str, fld: str) -> SpecError:
+        return SpecError(msg, field=fld, path=spath)
+
+    for sec, val in doc.items():
+        if sec not in SECTIONS:
+            raise err(f"unknown section [{sec}]; allowed: " + ", ".join(f"[{s}]" for s in SECTIONS),
+                      sec)
+        if not isinstance(val, dict):
+            raise err(f"[{sec}] must be a table", sec)
+        keys = SECTIONS[sec]
+        if keys is not None:
+            extra = set(val) - keys
+            if extra:
+                raise err(f"unknown key(s) {sorted(extra)} in [{sec}]; allowed: {sorted(keys)}",
+                          f"{sec}.{sorted(extra)[0]}")
+    for sec, req in REQUIRED.items():
+        if sec not in doc:
+            raise err(f"missing section [{sec}] (it needs {sorted(req)})", sec)
+        missing = req - set(doc[sec])
+        if missing:
+            raise err(f"missing key(s) {sorted(missing)} in [{sec}]", f"{sec}.{sorted(missing)[0]}")
+
+    sysd = doc["system"]
+    name = sysd["name"]
+    if not isinstance(name, str) or not name.strip():
+        raise err("must be a non-empty string", "system.name")
+    state_names = _names(sysd["states"], "system.states", err)
+    tname = sysd.get("time", "t")
+    if not isinstance(tname, str) or not tname.isidentifier():
+        raise err(f"must be an identifier, got {tname!r}", "system.time")
+    reserved = set(FUNCTIONS) | set(CONSTANTS) | {"norm", tname}
+    for s in state_names:
+        if s in reserved:
+            raise err(f"state name {s!r} clashes with a reserved name", "system.states")
+    t = sp.Symbol(tname, real=True)
+    states = tuple(sp.Symbol(s, real=True) for s in state_names)
+    n = len(states)
+
+    blocks: dict[str, Block] = {}
+    for bname, bdef in doc.get("blocks", {}).items():
+        fld = f"blocks.{bname}"
+        if not isinstance(bdef, dict):
+            raise err("must be a table with kind, weights, inputs, outputs", fld)
+        extra = set(bdef) - BLOCK_KEYS
+        if extra:
+            raise err(f"unknown key(s) {sorted(extra)}; allowed: {sorted(BLOCK_KEYS)}", fld)
+        if bname in reserved or bname in state_names:
+            raise err(f"block name {bname!r} clashes with a state or reserved name", fld)
+        kind = bdef.get("kind", "mlp")
+        if kind != "mlp":
+            raise err(f"kind {kind!r} is not supported; use kind = \"mlp\"", f"{fld}.kind")
+        for key in ("weights", "inputs", "outputs"):
+            if key not in bdef:
+                raise err(f"missing key {key!r}", f"{fld}.{key}")
+        weights = bdef["weights"]
+        if not isinstance(weights, str):
+            raise err("must be a path string", f"{fld}.weights")
+        wpath = Path(weights)
+        if not wpath.is_absolute():
+            wpath = base / wpath
+        ins = _posint(bdef["inputs"], f"{fld}.inputs", err)
+        outs = _posint(bdef["outputs"], f"{fld}.outputs", err)
+        act = bdef.get("activation")
+        if act is not None and not isinstance(act, str):
+            raise err("must be a string", f"{fld}.activation")
+        try:
+            blocks[bname] = load_mlp_block(bname, wpath, ins, outs, act, field=f"{fld}.weights")
+        except SpecError as exc:
+            raise SpecError(str(exc), path=spath) from None
+
+    scalars = {str(s): s for s in states}
+    scalars[tname] = t
+    vec_name = "x" if "x" not in state_names else None
+
+    def parse(text: Any, fld: str, allow_t: bool = True) -> sp.Expr:
+        sc = scalars if allow_t else {k: v for k, v in scalars.items() if k != tname}
+        return parse_expression(text, field=fld, scalars=sc, vector_name=vec_name,
+                                vector=states, blocks=blocks, path=spath)
+
+    def vector(val: Any, fld: str, length: int | None, allow_t: bool = True) -> list[sp.Expr]:
+        if not isinstance(val, list) or not val:
+            raise err("must be a non-empty list of expressions", fld)
+        if length is not None and len(val) != length:
+            raise err(f"must have {length} entries (one per state/input), got {len(val)}", fld)
+        return [parse(v, f"{fld}[{i}]", allow_t) for i, v in enumerate(val)]
+
+    def matrix(val: Any, fld: str, rows: int, only_t: bool = False) -> list[list[sp.Expr]]:
+        if not isinstance(val, list) or len(val) != rows:
+            raise err(f"must be a list of {rows} rows", fld)
+        out = []
+        width = None
+        for i, row in enumerate(val):
+            if not isinstance(row, list) or not row:
+                raise err(f"row {i} must be a non-empty list", f"{fld}[{i}]")
+            if width is None:
+                width = len(row)
+            elif len(row) != width:
+                raise err(f"row {i} has {len(row)} entries, row 0 has {width}", f"{fld}[{i}]")
+            prow = []
+            for j, v in enumerate(row):
+                e = parse(v, f"{fld}[{i}][{j}]")
+                if only_t and (e.free_symbols - {t}):
+                    raise err(f"{v!r} depends on the state; g may depend on {tname} only",
+                              f"{fld}[{i}][{j}]")
+                prow.append(e)
+            out.append(prow)
+        return out
+
+    dyn = doc["dynamics"]
+    f = vector(dyn["f"], "dynamics.f", n)
+    g = matrix(dyn["g"], "dynamics.g", n, only_t=True)
+    m = len(g[0])
+    diffusion = matrix(dyn["diffusion"], "dynamics.diffusion", n) if "diffusion" in dyn else None
+    pol = doc["policy"]
+    expert = vector(pol["expert"], "policy.expert", m, allow_t=False)
+    learned = vector(pol["learned"], "policy.learned", m, allow_t=False) if "learned" in pol \
+        else None
+    inputs = sysd.get("inputs")
+    if inputs is not None:
+        inputs = _names(inputs, "system.inputs", err)
+        if len(inputs) != m:
+            raise err(f"{len(inputs)} input names but g has {m} columns", "system.inputs")
+
+    unc = doc.get("uncertainty", {})
+    lam_mu = vector(unc["drift"], "uncertainty.drift", n) if "drift" in unc else None
+    lam_sigma = matrix(unc["diffusion"], "uncertainty.diffusion", n) if "diffusion" in unc \
+        else None
+    deltas = {}
+    for key in ("Delta_mu", "Delta_sigma"):
+        if key in unc:
+            deltas[key] = _nonneg(unc[key], f"uncertainty.{key}", err)
+    if lam_mu is not None and "Delta_mu" in deltas:
+        raise err("give either the drift expressions or Delta_mu, not both", "uncertainty.Delta_mu")
+    if lam_sigma is not None and "Delta_sigma" in deltas:
+        raise err("give either the diffusion expressions or Delta_sigma, not both",
+                  "uncertainty.Delta_sigma")
+    bdim = sysd.get("brownian_dim")
+    if bdim is not None:
+        bdim = _posint(bdim, "system.brownian_dim", err)
+    widths = {len(mat[0]) for mat in (diffusion, lam_sigma) if mat is not None}
+    if len(widths) > 1:
+        raise err(f"dynamics.diffusion and uncertainty.diffusion have different column counts "
+                  f"{sorted(widths)}; both must be n x d", "uncertainty.diffusion")
+    if bdim is not None and widths and bdim not in widths:
+        raise err(f"brownian_dim = {bdim} but the diffusion matrices have {widths.pop()} columns",
+                  "system.brownian_dim")
+
+    init = doc["initial"]
+    horizon = sysd["horizon"]
+    if isinstance(horizon, bool) or not isinstance(horizon, int | float) or not math.isfinite(
+            float(horizon)) or float(horizon) <= 0:
+        raise err(f"the horizon must be a finite number > 0, got {horizon!r}", "system.horizon")
+    try:
+        system = System(
+            name=name.strip(), states=states, f=f, g=g, expert=expert,
+            support=init["support"], horizon=float(horizon), t=t, inputs=inputs or (),
+            learned=learned, diffusion=diffusion, lambda_mu=lam_mu, lambda_sigma=lam_sigma,
+            Delta_mu=deltas.get("Delta_mu"), Delta_sigma=deltas.get("Delta_sigma"),
+            brownian_dim=bdim, true_support=init.get("true_support"), blocks=blocks,
+        )
+    except SpecError as exc:
+        raise SpecError(str(exc), path=spath) from None
+    tables = {k: MappingProxyType(dict(doc[k])) for k in
+              ("constants", "contraction", "l1drac", "tasil", "simulation") if k in doc}
+    return Spec(path=path, system=system, tables=MappingProxyType(tables))
+
+
+def _names(val: Any, fld: str, err) -> list[str]:
+    if not isinstance(val, list) or not val:
+        raise err("must be a non-empty list of names", fld)
+    out = []
+    for i, v in enumerate(val):
+        if not isinstance(v, str) or not v.isidentifier() or v.startswith("_"):
+            raise err(f"entry {i} ({v!r}) must be an identifier not starting with '_'", fld)
+        out.append(v)
+    if len(set(out)) != len(out):
+        raise err("names must be distinct", fld)
+    return out
+
+
+def _posint(val: Any, fld: str, err) -> int:
+    if isinstance(val, bool) or not isinstance(val, int) or val < 1:
+        raise err(f"must be a positive integer, got {val!r}", fld)
+    return int(val)
+
+
+def _nonneg(val: Any, fld: str, err) -> float:
+    if isinstance(val, bool) or not isinstance(val, int | float):
+        raise err(f"must be a number, got {val!r}", fld)
+    x = float(val)
+    if not math.isfinite(x) or x < 0:
+        raise err(f"must be a finite number >= 0, got {val!r}", fld)
+    return x

@@ -1,0 +1,389 @@
+"""The :class:`System`: everything the DRIP guarantee is about, as sympy expressions.
+
+Notation of the DRIP paper (drip_paper.tex, Definitions "Vector Fields" and "Systems"):
+known drift ``f(t, x)`` (without any policy), input operator ``g(t)`` (n x m, time only),
+expert ``pi*(x)``, learned ``pi_IL(x)``, known diffusion ``p(t, x)`` (n x d), unknown
+uncertainties ``Lambda_mu(t, x)`` (n) and ``Lambda_sigma(t, x)`` (n x d) or only their growth
+bounds ``Delta_mu``, ``Delta_sigma`` (DRIP Assumption 1 / L1-DRAC Assumption 4), the support box
+of the initial law ``D`` (and optionally of ``D_bar``), and the horizon ``T``.
+
+The nominal closed loop is ``fbar(t, x, pi(x)) = f(t, x) + g(t) pi(x)``; the true system adds
+``Lambda_mu`` to the drift and has diffusion ``p + Lambda_sigma``.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from functools import cached_property
+from types import MappingProxyType
+from typing import Any
+
+import numpy as np
+import sympy as sp
+
+from drip_cert.errors import SpecError
+from drip_cert.system.blocks import Block, block_applications
+from drip_cert.system.lower import lower
+
+RANK_TOL = 1e-10  #: relative singular-value threshold for the full-column-rank check of g
+
+
+def _matrix(value: Any, rows: int, cols: int, what: str) -> sp.ImmutableMatrix:
+    try:
+        mat = sp.ImmutableMatrix(value)
+    except (TypeError, ValueError) as exc:
+        raise SpecError(f"{what}: cannot form a matrix: {exc}") from None
+    if cols == 1 and mat.shape == (1, rows) and rows != 1:
+        mat = mat.T
+    if mat.shape != (rows, cols):
+        raise SpecError(f"{what} must be {rows} x {cols}, got {mat.shape[0]} x {mat.shape[1]}")
+    return mat
+
+
+@dataclass(frozen=True, eq=False)
+class System:
+    """A control system with expert and learned policies and its uncertainty (frozen).
+
+    Parameters
+    ----------
+    name
+        Label used in reports.
+    states
+        State symbols ``x_1..x_n``.
+    f
+        Known drift, n expressions in ``t`` and the states; must not contain the policy.
+    g
+        Input operator, n x m expressions in ``t`` only.
+    expert
+        Expert policy ``pi*``, m expressions in the states.
+    support
+        Box ``[(lo_1, hi_1), ...]`` supporting the initial law ``D``.
+    horizon
+        ``T > 0``.
+    t
+        Time symbol (default ``t``).
+    inputs
+        Names of the m inputs (default ``u1..um``).
+    learned
+        Learned policy ``pi_IL`` (m expressions) or ``None``.
+    diffusion
+        Known diffusion ``p`` (n x d), default zero.
+    lambda_mu, lambda_sigma
+        Uncertainties (n and n x d expressions) or ``None``.
+    Delta_mu, Delta_sigma
+        Given growth bounds, used when the expressions are not given.
+    brownian_dim
+        ``d``; defaults to the column count of the diffusion expressions, else ``n``.
+    true_support
+        Box supporting ``D_bar`` (default: the same as ``D``; identity coupling).
+    blocks
+        Blocks (neural networks) used in the expressions, by name.
+    """
+
+    name: str
+    states: tuple[sp.Symbol, ...]
+    f: sp.ImmutableMatrix
+    g: sp.ImmutableMatrix
+    expert: sp.ImmutableMatrix
+    support: tuple[tuple[float, float], ...]
+    horizon: float
+    t: sp.Symbol = sp.Symbol("t", real=True)
+    inputs: tuple[str, ...] = ()
+    learned: sp.ImmutableMatrix | None = None
+    diffusion: sp.ImmutableMatrix | None = None
+    lambda_mu: sp.ImmutableMatrix | None = None
+    lambda_sigma: sp.ImmutableMatrix | None = None
+    Delta_mu: float | None = None
+    Delta_sigma: float | None = None
+    brownian_dim: int | None = None
+    true_support: tuple[tuple[float, float], ...] | None = None
+    blocks: Mapping[str, Block] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        states = tuple(self.states)
+        if not states:
+            raise SpecError("a system needs at least one state", field="system.states")
+        if len(set(states)) != len(states):
+            raise SpecError("state names must be distinct", field="system.states")
+        object.__setattr__(self, "states", states)
+        n = len(states)
+        f = _matrix(self.f, n, 1, "dynamics.f")
+        g_raw = sp.ImmutableMatrix(self.g)
+        m = g_raw.shape[1] if g_raw.shape[0] == n else None
+        if m is None or m < 1:
+            raise SpecError(f"dynamics.g must be {n} x m with m >= 1, got {g_raw.shape}")
+        g = _matrix(self.g, n, m, "dynamics.g")
+        expert = _matrix(self.expert, m, 1, "policy.expert")
+        learned = None if self.learned is None else _matrix(self.learned, m, 1, "policy.learned")
+        d = self.brownian_dim
+        for mat in (self.diffusion, self.lambda_sigma):
+            if mat is not None and d is None:
+                d = sp.ImmutableMatrix(mat).shape[1]
+        d = n if d is None else int(d)
+        if d < 1:
+            raise SpecError(f"the Brownian dimension must be >= 1, got {d}",
+                            field="system.brownian_dim")
+        p = (sp.ImmutableMatrix.zeros(n, d) if self.diffusion is None
+             else _matrix(self.diffusion, n, d, "dynamics.diffusion"))
+        lam_mu = None if self.lambda_mu is None else _matrix(self.lambda_mu, n, 1,
+                                                             "uncertainty.drift")
+        lam_sigma = None if self.lambda_sigma is None else _matrix(
+            self.lambda_sigma, n, d, "uncertainty.diffusion")
+        inputs = tuple(self.inputs) or tuple(f"u{i + 1}" for i in range(m))
+        if len(inputs) != m:
+            raise SpecError(f"{len(inputs)} input names for an input operator with {m} columns",
+                            field="system.inputs")
+        for attr, val in (("f", f), ("g", g), ("expert", expert), ("learned", learned),
+                          ("diffusion", p), ("lambda_mu", lam_mu), ("lambda_sigma", lam_sigma),
+                          ("inputs", inputs), ("brownian_dim", d)):
+            object.__setattr__(self, attr, val)
+        allowed_x = set(states) | {self.t}
+        self._check_symbols(f, allowed_x, "dynamics.f")
+        self._check_symbols(g, {self.t}, "dynamics.g (g may depend on t only)")
+        self._check_symbols(expert, set(states), "policy.expert")
+        if learned is not None:
+            self._check_symbols(learned, set(states), "policy.learned")
+        self._check_symbols(p, allowed_x, "dynamics.diffusion")
+        if lam_mu is not None:
+            self._check_symbols(lam_mu, allowed_x, "uncertainty.drift")
+        if lam_sigma is not None:
+            self._check_symbols(lam_sigma, allowed_x, "uncertainty.diffusion")
+        for key in ("Delta_mu", "Delta_sigma"):
+            v = getattr(self, key)
+            if v is not None:
+                v = _nonneg_float(v, f"uncertainty.{key}")
+                object.__setattr__(self, key, v)
+        object.__setattr__(self, "support", _box(self.support, n, "initial.support"))
+        if self.true_support is not None:
+            object.__setattr__(self, "true_support",
+                               _box(self.true_support, n, "initial.true_support"))
+        T = _nonneg_float(self.horizon, "system.horizon")
+        if T <= 0:
+            raise SpecError(f"the horizon must be > 0, got {self.horizon!r}",
+                            field="system.horizon")
+        object.__setattr__(self, "horizon", T)
+        object.__setattr__(self, "blocks", MappingProxyType(dict(self.blocks)))
+        self._check_rank()
+
+    # ------------------------------------------------------------------ validation helpers
+    def _check_symbols(self, mat: sp.MatrixBase, allowed: set, what: str) -> None:
+        free = set().union(*(e.free_symbols for e in mat)) if len(mat) else set()
+        bad = free - allowed
+        if bad:
+            names = ", ".join(sorted(str(s) for s in bad))
+            raise SpecError(f"{what} uses symbols not allowed there: {names}")
+        for e in mat:
+            for app in block_applications(e):
+                if app.block_name not in self.blocks:
+                    raise SpecError(f"{what} calls an undeclared block '{app.block_name}'")
+
+    def _check_rank(self) -> None:
+        n, m = self.g.shape
+        if m > n:
+            raise SpecError(f"g is {n} x {m}: more inputs than states cannot have full column "
+                            "rank", field="dynamics.g")
+        for tt in self.rank_check_times():
+            G = self.g_at(tt)
+            if not np.all(np.isfinite(G)):
+                raise SpecError(f"g({tt:g}) is not finite", field="dynamics.g")
+            s = np.linalg.svd(G, compute_uv=False)
+            rank = int(np.sum(s > RANK_TOL * max(1.0, s[0])))
+            if rank < m:
+                raise SpecError(
+                    f"g({tt:g}) has rank {rank} < m = {m} columns (singular values "
+                    f"{np.array2string(s, precision=3)}); DRIP Assumption 1 needs full column "
+                    "rank: remove dependent inputs", field="dynamics.g")
+
+    # ------------------------------------------------------------------ sizes
+    @property
+    def n(self) -> int:
+        return len(self.states)
+
+    @property
+    def m(self) -> int:
+        return int(self.g.shape[1])
+
+    @property
+    def d(self) -> int:
+        return int(self.brownian_dim)
+
+    @property
+    def g_is_constant(self) -> bool:
+        return not any(e.free_symbols for e in self.g)
+
+    def rank_check_times(self) -> np.ndarray:
+        """Times at which time-varying quantities of g are checked (all of them if constant)."""
+        if self.g_is_constant:
+            return np.array([0.0])
+        return np.linspace(0.0, self.horizon, 65)
+
+    # ------------------------------------------------------------------ symbolic closed loops
+    def policy(self, which: str = "expert") -> sp.ImmutableMatrix:
+        """``pi*`` (``which='expert'``) or ``pi_IL`` (``'learned'``) as an m-vector."""
+        if which == "expert":
+            return self.expert
+        if which == "learned":
+            if self.learned is None:
+                raise SpecError("no learned policy is given (policy.learned)",
+                                field="policy.learned")
+            return self.learned
+        raise ValueError(f"policy must be 'expert' or 'learned', got {which!r}")
+
+    def closed_loop(self, which: str = "expert") -> sp.ImmutableMatrix:
+        """``fbar(t, x, pi(x)) = f(t, x) + g(t) pi(x)`` (DRIP eq. NominalVectorFields)."""
+        return sp.ImmutableMatrix(self.f + self.g * self.policy(which))
+
+    def closed_loop_jacobian(self, which: str = "expert") -> sp.ImmutableMatrix:
+        """``nabla_x fbar(t, x, pi(x))``, the matrix of DRIP Assumption 2."""
+        return sp.ImmutableMatrix(self.closed_loop(which).jacobian(self.states))
+
+    @property
+    def has_blocks(self) -> bool:
+        return bool(self.blocks)
+
+    # ------------------------------------------------------------------ numerics
+    def g_at(self, tt: float) -> np.ndarray:
+        """``g(t)`` as a float array (exact evaluation of the sympy matrix)."""
+        return np.array(self.g.subs(self.t, tt).evalf(), dtype=float)
+
+    def lower(self, exprs: sp.MatrixBase):
+        """jax function ``(t, x) -> array`` for expressions of this system (see :func:`lower`)."""
+        return lower(exprs, self.t, self.states, self.blocks)
+
+    @cached_property
+    def numeric(self) -> NumericSystem:
+        """jax callables of every part of the system (built once, lazily)."""
+        return NumericSystem.build(self)
+
+    def with_learned(self, learned: Sequence[sp.Expr] | sp.MatrixBase,
+                     blocks: Mapping[str, Block] | None = None) -> System:
+        """A copy with the learned policy replaced (and blocks added)."""
+        merged = dict(self.blocks)
+        merged.update(blocks or {})
+        return _replace(self, learned=sp.ImmutableMatrix(learned), blocks=merged)
+
+    def to_dict(self) -> dict[str, Any]:
+        """A JSON-ready description (expressions as strings)."""
+        def strs(mat):
+            return None if mat is None else [[str(e) for e in row] for row in mat.tolist()]
+
+        return {
+            "name": self.name,
+            "n": self.n,
+            "m": self.m,
+            "d": self.d,
+            "states": [str(s) for s in self.states],
+            "inputs": list(self.inputs),
+            "horizon": self.horizon,
+            "f": [str(e) for e in self.f],
+            "g": strs(self.g),
+            "expert": [str(e) for e in self.expert],
+            "learned": None if self.learned is None else [str(e) for e in self.learned],
+            "diffusion": strs(self.diffusion),
+            "uncertainty_drift": None if self.lambda_mu is None else [str(e)
+                                                                      for e in self.lambda_mu],
+            "uncertainty_diffusion": strs(self.lambda_sigma),
+            "Delta_mu_given": self.Delta_mu,
+            "Delta_sigma_given": self.Delta_sigma,
+            "support": [list(b) for b in self.support],
+            "true_support": None if self.true_support is None else [list(b)
+                                                                    for b in self.true_support],
+            "blocks": [b.to_dict() for b in self.blocks.values()],
+        }
+
+
+def _replace(sys_: System, **changes: Any) -> System:
+    kwargs = {k: getattr(sys_, k) for k in System.__dataclass_fields__}
+    kwargs.update(changes)
+    return System(**kwargs)
+
+
+def _nonneg_float(v: Any, fieldname: str) -> float:
+    if isinstance(v, bool) or not isinstance(v, int | float | np.floating | np.integer):
+        raise SpecError(f"expected a number, got {v!r}", field=fieldname)
+    x = float(v)
+    if not math.isfinite(x):
+        raise SpecError(f"expected a finite number, got {v!r}", field=fieldname)
+    if x < 0:
+        raise SpecError(f"must be >= 0, got {v!r}", field=fieldname)
+    return x
+
+
+def _box(value: Any, n: int, fieldname: str) -> tuple[tuple[float, float], ...]:
+    try:
+        arr = np.array(value, dtype=object)
+    except Exception:  # pragma: no cover
+        raise SpecError(f"expected {n} pairs [lo, hi], got {value!r}", field=fieldname) from None
+    if arr.shape != (n, 2):
+        raise SpecError(f"expected {n} pairs [lo, hi] (one per state), got {value!r}",
+                        field=fieldname)
+    out = []
+    for i, (lo, hi) in enumerate(arr):
+        for v in (lo, hi):
+            if isinstance(v, bool) or not isinstance(v, int | float | np.floating | np.integer):
+                raise SpecError(f"bound {v!r} of state {i} is not a number", field=fieldname)
+            if not math.isfinite(float(v)):
+                raise SpecError(f"bound {v!r} of state {i} is not finite: the support must be a "
+                                "bounded box", field=fieldname)
+        if float(lo) > float(hi):
+            raise SpecError(f"interval {i} is empty: lo = {lo} > hi = {hi}", field=fieldname)
+        out.append((float(lo), float(hi)))
+    return tuple(out)
+
+
+@dataclass(frozen=True, eq=False)
+class NumericSystem:
+    """jax-traceable callables of a :class:`System` (single path, unbatched).
+
+    ``f(t, x) -> (n,)``, ``g(t) -> (n, m)``, ``p(t, x) -> (n, d)``,
+    ``lam_mu(t, x) -> (n,)`` (zero when unknown), ``lam_sigma(t, x) -> (n, d)``,
+    ``expert(x) -> (m,)``, ``learned(x) -> (m,)`` or ``None``,
+    ``jac_expert(t, x)`` / ``jac_learned(t, x) -> (n, n)`` closed-loop Jacobians,
+    ``theta_ad(t) -> (m, n)``.
+    """
+
+    f: Any
+    g: Any
+    p: Any
+    lam_mu: Any
+    lam_sigma: Any
+    expert: Any
+    learned: Any
+    jac_expert: Any
+    jac_learned: Any
+    theta_ad: Any
+
+    @staticmethod
+    def build(s: System) -> NumericSystem:
+        from drip_cert._jax import jnp
+
+        n, d = s.n, s.d
+        f = s.lower(s.f)
+        g_fn = s.lower(s.g)
+        p = s.lower(s.diffusion)
+        lam_mu = (s.lower(s.lambda_mu) if s.lambda_mu is not None
+                  else (lambda t, x: jnp.zeros(n)))
+        lam_sigma = (s.lower(s.lambda_sigma) if s.lambda_sigma is not None
+                     else (lambda t, x: jnp.zeros((n, d))))
+        exp_fn = s.lower(s.expert)
+        learned = None if s.learned is None else s.lower(s.learned)
+        jac_e = s.lower(s.closed_loop_jacobian("expert"))
+        jac_l = None if s.learned is None else s.lower(s.closed_loop_jacobian("learned"))
+
+        from drip_cert.analysis.constants import theta_ad_symbolic
+
+        th = s.lower(theta_ad_symbolic(s))
+        return NumericSystem(
+            f=f,
+            g=lambda t: g_fn(t, jnp.zeros(n)),
+            p=p,
+            lam_mu=lam_mu,
+            lam_sigma=lam_sigma,
+            expert=lambda x: exp_fn(0.0, x),
+            learned=None if learned is None else (lambda x: learned(0.0, x)),
+            jac_expert=jac_e,
+            jac_learned=jac_l,
+            theta_ad=lambda t: th(t, jnp.zeros(n)),
+        )
