@@ -1,0 +1,207 @@
+"""Command line: ``drip-cert {check-spec, certify, design-l1, train, validate, reproduce}``.
+
+Thin by design: parse arguments, call library functions, print. Exit status 0 = certified /
+holds / feasible, 1 = not certified / violated / infeasible (with the reason), 2 = bad input or
+usage (a message on stderr naming the file and field, never a traceback).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from collections.abc import Callable, Sequence
+from typing import Any
+
+from drip_cert.errors import AssumptionViolation, DripCertError, InfeasibleDesign, SpecError
+
+
+def _print_json(obj: Any) -> None:
+    sys.stdout.write(json.dumps(obj, indent=2, allow_nan=False, default=_json_default) + "\n")
+
+
+def _json_default(o: Any) -> Any:
+    import numpy as np
+
+    if isinstance(o, np.integer):
+        return int(o)
+    if isinstance(o, np.floating):
+        v = float(o)
+        return v if np.isfinite(v) else (None if v != v else ("inf" if v > 0 else "-inf"))
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    if isinstance(o, np.bool_):
+        return bool(o)
+    raise TypeError(f"not JSON serialisable: {type(o).__name__}")
+
+
+# ---------------------------------------------------------------------------- subcommands
+def cmd_check_spec(args: argparse.Namespace) -> int:
+    from drip_cert.system import load_spec
+
+    spec = load_spec(args.spec)
+    s = spec.system
+    if args.json:
+        _print_json({"ok": True, "system": s.to_dict()})
+    else:
+        print(f"{args.spec}: OK — system '{s.name}', n = {s.n}, m = {s.m}, d = {s.d}, "
+              f"T = {s.horizon:g}, blocks: {', '.join(s.blocks) or 'none'}, learned policy: "
+              f"{'yes' if s.learned is not None else 'no'}")
+    return 0
+
+
+def cmd_certify(args: argparse.Namespace) -> int:
+    from drip_cert.bounds.certificate import certify
+    from drip_cert.report import certificate_markdown
+    from drip_cert.system import load_spec
+
+    spec = load_spec(args.spec)
+    cert = certify(spec)
+    if args.json:
+        _print_json(cert.to_dict())
+    else:
+        print(certificate_markdown(cert))
+    return 0 if cert.certified else 1
+
+
+def cmd_design_l1(args: argparse.Namespace) -> int:
+    from drip_cert.bounds.l1drac_toml import design_l1_report
+
+    report = design_l1_report(args.constants)
+    if args.json:
+        _print_json(report)
+    else:
+        from drip_cert.report import l1_design_text
+
+        print(l1_design_text(report))
+    return 0 if report["feasible"] else 1
+
+
+def cmd_train(args: argparse.Namespace) -> int:
+    from drip_cert.workflows import train_from_spec
+
+    summary = train_from_spec(args.spec, method=args.method, trajectories=args.trajectories,
+                              seed=args.seed, out=args.out, steps=args.steps,
+                              progress=not args.json)
+    if args.json:
+        _print_json(summary)
+    else:
+        print(f"trained {summary['method']} policy in {summary['wall_s']:.1f} s; "
+              f"held-out gap {summary['heldout_gap_mean']:.4g} (mean), written to {args.out}")
+    return 0
+
+
+def cmd_validate(args: argparse.Namespace) -> int:
+    from drip_cert.validate import validate_spec
+
+    report = validate_spec(args.spec, trajectories=args.trajectories, seed=args.seed,
+                           out=args.out, practical_ts=args.practical_ts, quick=args.quick,
+                           progress=not args.json)
+    if args.json:
+        _print_json(report)
+    else:
+        from drip_cert.report import validation_text
+
+        print(validation_text(report))
+    return 0 if report["holds"] else 1
+
+
+def cmd_reproduce(args: argparse.Namespace) -> int:
+    from drip_cert.workflows import reproduce
+
+    report = reproduce(args.name, out=args.out, quick=args.quick, seed=args.seed,
+                       progress=not args.json)
+    if args.json:
+        _print_json(report)
+    else:
+        print(report["summary"])
+    return 0 if report["holds"] else 1
+
+
+# ---------------------------------------------------------------------------- parser
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="drip-cert",
+        description="Certificates for DRIP (TaSIL + L1-DRAC): constants, bounds, validation.",
+    )
+    sub = p.add_subparsers(dest="command", required=True)
+
+    q = sub.add_parser("check-spec", help="parse and validate a TOML specification only")
+    q.add_argument("spec")
+    q.add_argument("--json", action="store_true")
+    q.set_defaults(func=cmd_check_spec)
+
+    q = sub.add_parser("certify", help="compute the certificate of a system")
+    q.add_argument("spec")
+    q.add_argument("--json", action="store_true", help="print JSON on stdout")
+    q.set_defaults(func=cmd_certify)
+
+    q = sub.add_parser("design-l1", help="L1-DRAC parameter feasibility from a constants file")
+    q.add_argument("constants")
+    q.add_argument("--json", action="store_true")
+    q.set_defaults(func=cmd_design_l1)
+
+    q = sub.add_parser("train", help="train an imitation policy (TaSIL or BC)")
+    q.add_argument("spec")
+    q.add_argument("--method", choices=["tasil", "bc"], default="tasil")
+    q.add_argument("--trajectories", type=_posint, default=20)
+    q.add_argument("--seed", type=int, default=0)
+    q.add_argument("--steps", type=_posint, default=None)
+    q.add_argument("--out", required=True)
+    q.add_argument("--json", action="store_true")
+    q.set_defaults(func=cmd_train)
+
+    q = sub.add_parser("validate", help="check a certificate against Monte-Carlo simulation")
+    q.add_argument("spec")
+    q.add_argument("--trajectories", type=_posint, default=1000)
+    q.add_argument("--seed", type=int, default=0)
+    q.add_argument("--out", default=None)
+    q.add_argument("--practical-ts", type=float, default=None,
+                   help="simulate at this T_s when the certified one is impractically small")
+    q.add_argument("--quick", action="store_true")
+    q.add_argument("--json", action="store_true")
+    q.set_defaults(func=cmd_validate)
+
+    q = sub.add_parser("reproduce", help="reproduce a paper experiment end to end")
+    q.add_argument("name", choices=["paper-4d"])
+    q.add_argument("--out", default="demo_out")
+    q.add_argument("--quick", action="store_true")
+    q.add_argument("--seed", type=int, default=0)
+    q.add_argument("--json", action="store_true")
+    q.set_defaults(func=cmd_reproduce)
+    return p
+
+
+def _posint(text: str) -> int:
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from None
+    if v < 1:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}")
+    return v
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point; returns the exit status."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    func: Callable[[argparse.Namespace], int] = args.func
+    try:
+        return func(args)
+    except SpecError as exc:
+        print(f"drip-cert: error: {exc}", file=sys.stderr)
+        return 2
+    except (AssumptionViolation, InfeasibleDesign) as exc:
+        print(f"drip-cert: not certified: {exc}", file=sys.stderr)
+        return 1
+    except DripCertError as exc:
+        print(f"drip-cert: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("drip-cert: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())
