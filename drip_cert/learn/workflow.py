@@ -1,0 +1,303 @@
+"""From a specification to a learned policy and its TaSIL certificate.
+
+* :func:`tasil_settings` reads the spec's ``[tasil]`` table (validated, documented defaults);
+* :func:`train_on_system` generates the expert demonstrations of DRIP Definition "Training
+  Data", trains TaSIL or BC, and returns the policy as an MLP block for ``System.with_learned``;
+* :func:`tasil_section` computes the per-trajectory ``h_0, h_1`` soundly, the regularity constant
+  ``L_Delta`` with its provenance, and builds the certificate of math/tasil.md sections 3-4
+  (this project's construction, not TaSIL's own constant).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import sympy as sp
+
+from drip_cert.errors import SpecError
+from drip_cert.learn.data import Demonstrations, generate_demonstrations
+from drip_cert.learn.mlp import MLP
+from drip_cert.provenance import How, Quantity
+from drip_cert.system.blocks import BlockFunction, block_applications, mlp_block
+from drip_cert.system.system import System
+
+POLICY_BLOCK = "pi_il"  #: block name of a trained policy inside the System
+
+_DEFAULTS: dict[str, Any] = {
+    "method": "tasil",  # "tasil" | "bc"
+    "order": 1,
+    "trajectories": 20,  # the paper's n
+    "heldout": 20,  # fresh expert trajectories for the held-out form (3.3 c)
+    "samples": 100,  # k of the uniform partition of [0, T]
+    "hidden": [64, 64],
+    "activation": "tanh",
+    "steps": 2000,
+    "lr": 3e-3,
+    "batch": 128,
+    "seed": 0,
+    "delta": 0.1,  # failure probability of rho_TaSIL
+    "eta": math.inf,  # local delta-ISS radius (the comparison bound is global: inf)
+    "tube_radius": math.inf,  # R of assumption A2 (global MLP bounds: inf)
+    "policy": None,  # path of a trained policy (.npz); relative to the spec
+}
+
+
+@dataclass(frozen=True)
+class TasilSettings:
+    """Validated ``[tasil]`` table (see :data:`_DEFAULTS` for the meaning and defaults)."""
+
+    method: str
+    order: int
+    trajectories: int
+    heldout: int
+    samples: int
+    hidden: tuple[int, ...]
+    activation: str
+    steps: int
+    lr: float
+    batch: int
+    seed: int
+    delta: float
+    eta: float
+    tube_radius: float
+    policy: str | None
+
+
+def tasil_settings(table: Mapping[str, Any]) -> TasilSettings:
+    """Validate the ``[tasil]`` table of a spec (unknown keys and bad values: SpecError)."""
+    extra = set(table) - set(_DEFAULTS)
+    if extra:
+        raise SpecError(f"unknown key(s) {sorted(extra)}; allowed {sorted(_DEFAULTS)}",
+                        field="tasil")
+    v = {**_DEFAULTS, **dict(table)}
+    if v["method"] not in ("tasil", "bc"):
+        raise SpecError(f"must be 'tasil' or 'bc', got {v['method']!r}", field="tasil.method")
+    for key in ("order", "trajectories", "heldout", "samples", "steps", "batch"):
+        x = v[key]
+        if isinstance(x, bool) or not isinstance(x, int) or x < (0 if key == "heldout" else 1):
+            raise SpecError(f"must be a positive integer, got {x!r}", field=f"tasil.{key}")
+    if v["order"] not in (1, 2):
+        raise SpecError(f"must be 1 or 2, got {v['order']!r}", field="tasil.order")
+    hidden = v["hidden"]
+    if not isinstance(hidden, list) or not hidden or any(
+            isinstance(h, bool) or not isinstance(h, int) or h < 1 for h in hidden):
+        raise SpecError(f"must be a list of positive integers, got {hidden!r}",
+                        field="tasil.hidden")
+    if v["activation"] not in ("tanh", "gelu"):
+        raise SpecError(f"must be 'tanh' or 'gelu' (smooth), got {v['activation']!r}",
+                        field="tasil.activation")
+    for key in ("lr", "delta", "eta", "tube_radius"):
+        x = v[key]
+        if isinstance(x, bool) or not isinstance(x, int | float) or not x > 0 or x != x:
+            raise SpecError(f"must be a number > 0, got {x!r}", field=f"tasil.{key}")
+    if not v["delta"] < 1:
+        raise SpecError(f"must be in (0, 1), got {v['delta']!r}", field="tasil.delta")
+    if isinstance(v["seed"], bool) or not isinstance(v["seed"], int):
+        raise SpecError(f"must be an integer, got {v['seed']!r}", field="tasil.seed")
+    if v["policy"] is not None and not isinstance(v["policy"], str):
+        raise SpecError("must be a path string", field="tasil.policy")
+    return TasilSettings(v["method"], int(v["order"]), int(v["trajectories"]),
+                         int(v["heldout"]), int(v["samples"]), tuple(int(h) for h in hidden),
+                         v["activation"], int(v["steps"]), float(v["lr"]), int(v["batch"]),
+                         int(v["seed"]), float(v["delta"]), float(v["eta"]),
+                         float(v["tube_radius"]), v["policy"])
+
+
+def nominal_field(s: System):
+    """``(t, x, u) -> f(t, x) + g(t) u``, the nominal drift of DRIP (NominalVectorFields)."""
+    num = s.numeric
+
+    def field(t, x, u):
+        return num.f(t, x) + num.g(t) @ u
+
+    return field
+
+
+def demonstrations(s: System, n: int, k: int, seed: int, stream: int = 0) -> Demonstrations:
+    """``n`` expert trajectories of the nominal model from ``xi_i ~ D`` (uniform on the box),
+    sampled on the uniform partition of ``[0, T]`` with ``k`` intervals (DRIP Def. "Training
+    Data"). ``stream`` separates training (0) from held-out (1) draws of the same seed."""
+    from drip_cert._jax import jax
+
+    key = jax.random.fold_in(jax.random.PRNGKey(seed), stream)
+    return generate_demonstrations(nominal_field(s), s.numeric.expert,
+                                   np.array(s.support), n, s.horizon, k, key)
+
+
+def learned_system(s: System, mlp: MLP, name: str = POLICY_BLOCK, source: str = "") -> System:
+    """``s`` with ``pi_IL = mlp`` as a block named ``name`` (``pi_il(x)[j]``)."""
+    if mlp.in_dim != s.n or mlp.out_dim != s.m:
+        raise SpecError(f"the policy maps R^{mlp.in_dim} -> R^{mlp.out_dim}, the system needs "
+                        f"R^{s.n} -> R^{s.m}")
+    block = mlp_block(name, mlp, source=source)
+    exprs = [block.component(j)(*s.states) for j in range(s.m)]
+    return s.with_learned(exprs, {name: block})
+
+
+# ------------------------------------------------------------------ regularity (L_Delta)
+def jacobian_lipschitz(s: System, which: str) -> Quantity:
+    """A bound on the Lipschitz constant of the Jacobian of ``pi*`` or ``pi_IL`` (operator norm;
+    DRIP Assumption "PolicyRegularity" (b)).
+
+    Routes: zero Hessian (affine policy, exact 0); a policy ``A x + b + C h(x)`` linear in MLP
+    blocks applied to the state gives ``sum ||C_h||_2 L_dh`` with the sound layerwise bound of
+    :func:`drip_cert.learn.mlp_bounds.jacobian_lipschitz_bound`; anything else is a sampled
+    estimate of ``sup ||d^2 pi||_F`` (labelled so).
+    """
+    from drip_cert.learn.mlp_bounds import jacobian_lipschitz_bound
+
+    pol = sp.Matrix(s.policy(which))
+    x = s.states
+    apps = set()
+    for e in pol:
+        apps |= block_applications(e)
+    # replace each block application by a symbol and check linearity in those symbols
+    syms = {a: sp.Dummy(str(type(a).__name__)) for a in apps}
+    lin = pol.xreplace(syms)
+    ok = all(a.args == tuple(x) and not a.deriv for a in apps)
+    if ok:
+        for e in lin:
+            for z in list(syms.values()) + list(x):
+                if sp.diff(e, z, 2) != 0:
+                    ok = False
+            for z1 in syms.values():
+                for z2 in list(syms.values()) + list(x):
+                    if z1 != z2 and sp.diff(e, z1, z2) != 0:
+                        ok = False
+    if ok:
+        total, notes = 0.0, []
+        by_block: dict[str, list[BlockFunction]] = {}
+        for a in apps:
+            by_block.setdefault(a.block_name, []).append(a)
+        for bname, members in sorted(by_block.items()):
+            block = s.blocks[bname]
+            if block.mlp is None:
+                ok = False
+                break
+            C = np.zeros((s.m, block.out_dim))
+            for a in members:
+                for i, e in enumerate(lin):
+                    C[i, a.out_index] = float(sp.diff(e, syms[a]))
+            c2 = float(np.linalg.norm(C, 2))
+            L = jacobian_lipschitz_bound(block.mlp).value
+            total += c2 * L
+            notes.append(f"||C_{bname}||_2 = {c2:.4g} times L_d{bname} = {L:.4g}")
+        if ok:
+            how = How.EXACT if not apps else How.SOUND
+            note = ("affine policy: zero Hessian" if not apps else
+                    "policy affine in MLP blocks; " + "; ".join(notes)
+                    + " (layerwise product-rule bound, global)")
+            return Quantity(f"L_dpi_{which}", total * (1 + 1e-12) if apps else 0.0, how,
+                            "DRIP Assumption PolicyRegularity (b)", note)
+    # sampled estimate of sup ||Hessian||_F on the support box enlarged by 1
+    from drip_cert._jax import jax, jnp
+
+    fn = s.lower(pol)
+    hess = jax.jit(jax.vmap(jax.hessian(lambda z: fn(0.0, z))))
+    rng = np.random.default_rng(0)
+    box = np.array(s.support)
+    X = rng.uniform(box[:, 0] - 1.0, box[:, 1] + 1.0, size=(4096, s.n))
+    H = np.asarray(hess(jnp.asarray(X)))
+    val = float(np.max(np.sqrt(np.sum(H**2, axis=(1, 2, 3)))))
+    return Quantity(f"L_dpi_{which}", val, How.ESTIMATE, "DRIP Assumption PolicyRegularity (b)",
+                    "sampled sup ||d^2 pi||_F on the support box enlarged by 1 (4096 points, "
+                    "seed 0): an estimate, not a bound")
+
+
+# ------------------------------------------------------------------ h_0, h_1 along trajectories
+def trajectory_h(s: System, demos: Demonstrations, L_Delta: float, contraction_global: bool):
+    """Per-trajectory sound ``(h_0, h_1)`` of ``Delta = pi_IL - pi*`` along expert trajectories.
+
+    Between grid points the speed of an autonomous contracting closed loop does not grow
+    (``d/dt x_dot = J x_dot`` and ``mu_2(J) < 0``), so ``||x_dot(t)|| <= ||x_dot(t_k)||`` on
+    ``[t_k, t_{k+1}]``; this makes the Lipschitz correction of math/tasil.md section 4 sound when
+    the expert contracts on all of ``R^n`` and ``f`` does not depend on ``t``. Otherwise the
+    grid maximum of the speed is used and the result is labelled an estimate.
+    """
+    from drip_cert._jax import jax, jnp
+    from drip_cert.bounds.tasil import h_continuous
+
+    num = s.numeric
+    delta = jax.jit(jax.vmap(lambda z: num.learned(z) - num.expert(z)))
+    jac = jax.jit(jax.vmap(jax.jacfwd(lambda z: num.learned(z) - num.expert(z))))
+    field = nominal_field(s)
+    speed_fn = jax.jit(jax.vmap(lambda z: jnp.linalg.norm(field(0.0, z, num.expert(z)))))
+    autonomous = not any(s.t in e.free_symbols for e in s.f) and s.g_is_constant
+    sound = contraction_global and autonomous
+    hs = []
+    for traj in demos.states:
+        X = jnp.asarray(traj)
+        d = np.asarray(delta(X))
+        j = np.asarray(jac(X))
+        sp_ = np.asarray(speed_fn(X))
+        speed = sp_[:-1] if sound else np.maximum(sp_[:-1], sp_[1:])
+        hs.append(h_continuous(demos.times, d, j, speed, L_Delta))
+    how = How.SOUND if sound else How.ESTIMATE
+    return hs, how
+
+
+# ------------------------------------------------------------------ training and certificate
+@dataclass(frozen=True)
+class TrainedPolicy:
+    """A trained policy with its data, for the certificate and the reports."""
+
+    system: System  #: the system with pi_IL set to the trained policy
+    mlp: MLP
+    result: Any  #: drip_cert.learn.tasil.TrainResult
+    train: Demonstrations
+    heldout: Demonstrations | None
+    settings: TasilSettings
+
+
+def train_on_system(s: System, settings: TasilSettings, method: str | None = None,
+                    progress: bool = False) -> TrainedPolicy:
+    """Generate demonstrations, train TaSIL (or BC) and attach the policy to ``s``.
+
+    Training and held-out demonstrations use independent streams of ``settings.seed``.
+    """
+    from drip_cert.learn.tasil import train_policy
+
+    method = method or settings.method
+    train = demonstrations(s, settings.trajectories, settings.samples, settings.seed, 0)
+    heldout = (demonstrations(s, settings.heldout, settings.samples, settings.seed, 1)
+               if settings.heldout > 0 else None)
+    res = train_policy(train, s.numeric.expert, method=method, order=settings.order,
+                       hidden=settings.hidden, activation=settings.activation,
+                       seed=settings.seed, steps=settings.steps, lr=settings.lr,
+                       batch=settings.batch, progress=progress)
+    return TrainedPolicy(learned_system(s, res.mlp), res.mlp, res, train, heldout, settings)
+
+
+def tasil_section(s: System, train: Demonstrations, heldout: Demonstrations | None,
+                  gamma0: Quantity, contraction_global: bool, settings: TasilSettings,
+                  method: str = "tasil-1"):
+    """The TaSIL certificate of ``s.learned`` (math/tasil.md sections 3-4).
+
+    ``gamma0`` is the linear delta-ISS gain of the expert closed loop (tighter comparison bound);
+    ``L_Delta = L_dpi(pi_IL) + L_dpi(pi*)`` (triangle inequality).
+    """
+    from drip_cert.bounds.tasil import tasil_certificate
+
+    L_il = jacobian_lipschitz(s, "learned")
+    L_ex = jacobian_lipschitz(s, "expert")
+    L_Delta = L_il.value + L_ex.value
+    h_train, how_t = trajectory_h(s, train, L_Delta, contraction_global)
+    h_val, _ = (trajectory_h(s, heldout, L_Delta, contraction_global) if heldout is not None
+                else (None, how_t))
+    cert = tasil_certificate(
+        [h.h0 for h in h_train], [h.h1 for h in h_train], gamma0=gamma0.value,
+        L_Delta=L_Delta, delta=settings.delta, eta=settings.eta, R=settings.tube_radius,
+        heldout_h0=None if h_val is None else [h.h0 for h in h_val],
+        heldout_h1=None if h_val is None else [h.h1 for h in h_val],
+        method=method, continuous=True)
+    provenance = {
+        "L_dpi_learned": L_il.to_dict(),
+        "L_dpi_expert": L_ex.to_dict(),
+        "h_how": how_t.value,
+        "gamma0": gamma0.to_dict(),
+    }
+    return cert, provenance
