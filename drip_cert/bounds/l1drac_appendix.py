@@ -1,0 +1,713 @@
+"""Appendix A of L1-DRAC: every constant and map of the certificate, as pure functions.
+
+Source: A. Gahlawat, S. H. Karumanchi, N. Hovakimyan, "L1-DRAC: Distributionally Robust Adaptive
+Control -- Global Results", arXiv:2509.04619 (2025-09-04), Appendix A (printed pp. 43-46), and the
+bandwidth/sampling functions of Sec. 3.2 (printed pp. 14-15): Gamma_r, Gamma_a (18b, c),
+Theta_r, Theta_a (22, 23) and the Upsilon maps (25a-c). Equation numbers are the paper's.
+
+Every function takes a constants object ``c`` (a :class:`drip_cert.bounds.l1drac.L1Constants`,
+read through its attributes only) and the moment order ``p``; the piecewise-constant-law
+quantities (A.13)-(A.19) also take the control parameters ``omega``, ``Ts`` and ``lambda_s``.
+
+ASCII names of the paper's symbol families (subscript ``i`` is the paper's index):
+
+=================  =========================  ===========================================
+paper              here                       order in ``(rho + Delta_star)`` (Sec. 3.2)
+=================  =========================  ===========================================
+Delta_{circ_i}     ``circ_i``                 0
+Delta_{ocirc_i}    ``ocirc_i``  (circledcirc) 1/2
+Delta_{odot_i}     ``odot_i``                 1
+Delta_{otimes_i}   ``otimes_i``               3/2
+Delta_{oast_i}     ``oast_i``   (circledast)  2
+hat-Delta_i        ``hat_i``
+=================  =========================  ===========================================
+
+Known typos of the paper, fixed here (each also marked where the code fixes it):
+
+* (A.10b), printed p. 45: Delta_{odot_4} contains hat-Delta_6, which is defined nowhere; the
+  derivation (D.132b and D.150-D.151c) shows it is hat-Delta_5 (A.8c). We use hat-Delta_5.
+* (D.142b), printed p. 137: a stray gamma'_sigma(omega, T_s), defined nowhere, in the bound of
+  Delta_{tilde H_sigma}. Proposition D.11 has no such term and (A.17a) does not carry it; we
+  implement (A.17a) as printed (no gamma'_sigma).
+
+Numerics: every ``e^x - 1`` of the paper is :func:`math.expm1`, every ``1 - e^{-x}`` is
+``-expm1(-x)``, and ``1 - (lambda_s/omega) (e^{omega Ts}-1)/(e^{lambda_s Ts}-1)`` in gamma'_2
+(A.13c) is computed without cancellation (:func:`_one_minus_ratio`), so all quantities keep full
+relative precision down to ``Ts = 1e-14`` and below.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:  # pragma: no cover
+    from drip_cert.bounds.l1drac import L1Constants
+
+__all__ = [
+    "frak_p",
+    "frak_p_prime",
+    "frak_p_dprime",
+    "lip_indicator",
+    "RefConstants",
+    "TrueConstants",
+    "SamplingConstants",
+    "reference_constants",
+    "true_constants",
+    "sampling_constants",
+    "upsilon1_prime",
+    "upsilon2_prime",
+    "upsilon3_prime",
+    "upsilon_minus_tilde",
+    "upsilon_minus",
+    "upsilon_ring",
+    "gamma_r",
+    "gamma_a",
+    "theta_r",
+    "theta_a",
+    "upsilon_a1",
+    "upsilon_a2",
+    "upsilon_a3",
+    "upsilon_sum",
+]
+
+
+# --------------------------------------------------------------------------------------------
+# (A.1) global constants
+# --------------------------------------------------------------------------------------------
+
+
+def frak_p(p: int) -> float:
+    """Fraktur p(p) = (p (p - 1) / 2)^{1/2}; implements (A.1a) of L1-DRAC (zero at p = 1)."""
+    return math.sqrt(p * (p - 1) / 2.0)
+
+
+def frak_p_prime(p: int) -> float:
+    """Fraktur p'(p) = (p (2p - 1) / 2)^{1/2}; implements (A.1a) of L1-DRAC."""
+    return math.sqrt(p * (2 * p - 1) / 2.0)
+
+
+def frak_p_dprime(p: int) -> float:
+    """Fraktur p''(p) = (p (4p - 1))^{1/2}; implements (A.1a) of L1-DRAC."""
+    return math.sqrt(p * (4 * p - 1))
+
+
+def lip_indicator(c: L1Constants) -> float:
+    """1_Lip(f): 1.0 when Assumption 8 (global Lipschitz f) holds, else 0.0; (A.1b) of L1-DRAC."""
+    return 1.0 if c.lip_f else 0.0
+
+
+# --------------------------------------------------------------------------------------------
+# A.1 Reference process, (A.2)-(A.7)
+# --------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class RefConstants:
+    """The reference-process constants Delta^r of (A.2)-(A.7) of L1-DRAC at one moment order p.
+
+    ``lam``, ``Delta_star`` and ``p`` are carried along because (18b) and (22) need them.
+    """
+
+    p: int
+    lam: float
+    Delta_star: float
+    hat_1: float
+    hat_2: float
+    hat_3: float
+    hat_4: float
+    circ_1: float
+    circ_2: float
+    circ_3: float
+    circ_4: float
+    ocirc_1: float
+    ocirc_2: float
+    ocirc_3: float
+    ocirc_4: float
+    odot_1: float
+    odot_2: float
+    odot_3: float
+    odot_4: float
+    odot_5: float
+    odot_6: float
+    odot_7: float
+    odot_8: float
+    otimes_1: float
+    otimes_2: float
+    otimes_3: float
+    otimes_4: float
+    otimes_5: float
+    oast_1: float
+    oast_2: float
+    oast_3: float
+
+
+def reference_hats(c: L1Constants, p: int) -> tuple[float, float, float, float]:
+    """hat-Delta^r_{1..4}(p); implements (A.2a) and (A.2b) of L1-DRAC.
+
+    Returns
+    -------
+    tuple
+        ``(hat_1(p), hat_2(p), hat_3, hat_4)``.
+    """
+    sl = math.sqrt(c.lam)
+    ind = lip_indicator(c)
+    fp = frak_p(p)
+    h1 = c.Delta_g * (
+        (c.Delta_f * (2.0 + c.Delta_star) * (1.0 - ind) + c.Delta_mu) / sl
+        + fp * (2.0 * c.Delta_p + c.Delta_sigma)
+    )
+    h2 = c.Delta_g * fp * c.Delta_sigma
+    h3 = c.Delta_g * (c.Delta_f * (1.0 - ind) + c.Delta_mu) / sl
+    h4 = (c.Delta_g * c.L_f * ind + c.Delta_g_dot) / sl
+    return h1, h2, h3, h4
+
+
+def reference_constants(c: L1Constants, p: int) -> RefConstants:
+    """All reference-process constants at moment order p; implements (A.2)-(A.7) of L1-DRAC.
+
+    Parameters
+    ----------
+    c
+        The paper's constants (Assumptions 1-8).
+    p
+        Moment order, an integer in ``{1, ..., p_star}`` (not re-checked here).
+
+    Returns
+    -------
+    RefConstants
+        hat-Delta^r (A.2), Delta^r_circ (A.3), Delta^r_ocirc (A.4), Delta^r_odot (A.5),
+        Delta^r_otimes (A.6), Delta^r_oast (A.7).
+    """
+    lam = c.lam
+    sl = math.sqrt(lam)
+    sm = math.sqrt(c.m)
+    fp = frak_p(p)
+    fp1 = frak_p_prime(p)
+    h1, h2, h3, h4 = reference_hats(c, p)
+    dg = c.Delta_g
+    dmp = c.Delta_mu_par
+    par = c.Delta_p_par + c.Delta_sigma_par  # (Delta_p^par + Delta_sigma^par), everywhere below
+    g2m = dg * dg * dmp / sl  # Delta_g^2 Delta_mu^par / sqrt(lambda)
+    # (A.3a)-(A.3c)
+    circ_1 = c.Delta_p**2 + (c.Delta_p + c.Delta_sigma) ** 2
+    circ_2 = dmp / sl * (h1 + g2m)
+    circ_3 = fp1 / sl * par * (h1 + 2.0 * g2m)
+    circ_4 = par * dg / lam * (fp1**2 * dg * par + sm * (2.0 * c.Delta_p + c.Delta_sigma))
+    # (A.4a)-(A.4c)
+    ocirc_1 = 2.0 * c.Delta_sigma * (c.Delta_p + c.Delta_sigma)
+    ocirc_2 = dmp / sl * h2
+    ocirc_3 = fp1 / sl * (par * h2 + c.Delta_sigma_par * (h1 + 2.0 * g2m))
+    ocirc_4 = (
+        dg
+        / lam
+        * (
+            par * (2.0 * fp1**2 * dg * c.Delta_sigma_par + sm * c.Delta_sigma)
+            + sm * c.Delta_sigma_par * (2.0 * c.Delta_p + c.Delta_sigma)
+        )
+    )
+    # (A.5a)-(A.5d)
+    odot_1 = c.Delta_sigma**2
+    odot_2 = 2.0 * c.Delta_g_perp * c.Delta_mu_perp
+    odot_3 = 2.0 * fp * (c.Delta_g_perp * (c.Delta_p_perp + c.Delta_sigma_perp) + c.Delta_p)
+    odot_4 = dmp / sl * (h1 + h3 + 2.0 * g2m)
+    odot_5 = dmp * (h4 / sl + 4.0 * dg) + 2.0 * sl * dg * fp * par
+    odot_6 = fp1 / sl * (par * (h3 + 2.0 * g2m) + c.Delta_sigma_par * h2)
+    odot_7 = fp1 * par * (h4 / sl + 2.0 * dg)
+    odot_8 = c.Delta_sigma_par * dg / lam * (fp1**2 * dg * c.Delta_sigma_par + sm * c.Delta_sigma)
+    # (A.6a)-(A.6b)
+    otimes_1 = 2.0 * fp * c.Delta_g_perp * c.Delta_sigma_perp
+    otimes_2 = dmp * h2 / sl
+    otimes_3 = 2.0 * fp * sl * dg * c.Delta_sigma_par
+    otimes_4 = fp1 * c.Delta_sigma_par * (h3 + 2.0 * g2m) / sl
+    otimes_5 = fp1 * c.Delta_sigma_par * (h4 / sl + 2.0 * dg)
+    # (A.7a)
+    oast_1 = 2.0 * c.Delta_g_perp * c.Delta_mu_perp
+    oast_2 = dmp * (h3 + g2m) / sl
+    oast_3 = dmp * (h4 / sl + 4.0 * dg)
+    return RefConstants(
+        p=p,
+        lam=lam,
+        Delta_star=c.Delta_star,
+        hat_1=h1,
+        hat_2=h2,
+        hat_3=h3,
+        hat_4=h4,
+        circ_1=circ_1,
+        circ_2=circ_2,
+        circ_3=circ_3,
+        circ_4=circ_4,
+        ocirc_1=ocirc_1,
+        ocirc_2=ocirc_2,
+        ocirc_3=ocirc_3,
+        ocirc_4=ocirc_4,
+        odot_1=odot_1,
+        odot_2=odot_2,
+        odot_3=odot_3,
+        odot_4=odot_4,
+        odot_5=odot_5,
+        odot_6=odot_6,
+        odot_7=odot_7,
+        odot_8=odot_8,
+        otimes_1=otimes_1,
+        otimes_2=otimes_2,
+        otimes_3=otimes_3,
+        otimes_4=otimes_4,
+        otimes_5=otimes_5,
+        oast_1=oast_1,
+        oast_2=oast_2,
+        oast_3=oast_3,
+    )
+
+
+# --------------------------------------------------------------------------------------------
+# A.2 True process, (A.8)-(A.12)
+# --------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class TrueConstants:
+    """The true-process constants of (A.8)-(A.12) of L1-DRAC at one moment order p."""
+
+    p: int
+    lam: float
+    hat_1: float
+    hat_2: float
+    hat_3: float
+    hat_4: float
+    hat_5: float
+    ocirc_1: float
+    odot_1: float
+    odot_2: float
+    odot_3: float
+    odot_4: float
+    otimes_1: float
+    otimes_2: float
+    otimes_3: float
+    otimes_4: float
+    oast_1: float
+    oast_2: float
+    oast_3: float
+
+
+def true_constants(c: L1Constants, p: int) -> TrueConstants:
+    """All true-process constants at moment order p; implements (A.8)-(A.12) of L1-DRAC.
+
+    The paper's (A.10b) prints hat-Delta_6 in Delta_{odot_4}; it is hat-Delta_5 (see the module
+    docstring), and hat-Delta_5 is used.
+    """
+    lam = c.lam
+    sl = math.sqrt(lam)
+    ind = lip_indicator(c)
+    fp = frak_p(p)
+    fp1 = frak_p_prime(p)
+    dg = c.Delta_g
+    lmp = c.L_mu_par
+    lpar = c.L_p_par + c.L_sigma_par  # (L_p^par + L_sigma^par)
+    # (A.8a)-(A.8c)
+    h1 = 2.0 / sl * dg * c.Delta_f * (1.0 - ind)
+    h2 = dg * fp * (c.L_p + c.L_sigma)
+    h3 = dg * c.Delta_f * (1.0 - ind) / sl
+    h4 = (dg * (c.L_mu + c.L_f * ind) + c.Delta_g_dot) / sl
+    h5 = math.sqrt(c.m) * dg * (c.L_p + c.L_sigma)
+    # (A.9)
+    ocirc_1 = fp1 * lpar * h1 / sl
+    # (A.10a)
+    odot_1 = (c.L_p + c.L_sigma) ** 2
+    odot_2 = lmp * h1 / sl
+    odot_3 = fp1 * lpar * h2 / sl
+    # (A.10b) -- ERRATUM: the paper prints hat-Delta_6 (undefined); it is hat-Delta_5 (D.132b).
+    odot_4 = lpar * (h5 + dg * dg * fp1**2 * lpar) / lam
+    # (A.11a)-(A.11c)
+    otimes_1 = 2.0 * c.Delta_g_perp * fp * (c.L_p_perp + c.L_sigma_perp)
+    otimes_2 = 2.0 * sl * dg * fp * lpar + lmp * h2 / sl
+    otimes_3 = fp1 * lpar * h3 / sl
+    otimes_4 = fp1 * lpar * (h4 / sl + 2.0 * dg * (1.0 + dg / lam * lmp))
+    # (A.12)
+    oast_1 = 2.0 * c.Delta_g_perp * c.L_mu_perp
+    oast_2 = lmp * h3 / sl
+    oast_3 = lmp * (h4 / sl + dg * (4.0 + dg / lam * lmp))
+    return TrueConstants(
+        p=p,
+        lam=lam,
+        hat_1=h1,
+        hat_2=h2,
+        hat_3=h3,
+        hat_4=h4,
+        hat_5=h5,
+        ocirc_1=ocirc_1,
+        odot_1=odot_1,
+        odot_2=odot_2,
+        odot_3=odot_3,
+        odot_4=odot_4,
+        otimes_1=otimes_1,
+        otimes_2=otimes_2,
+        otimes_3=otimes_3,
+        otimes_4=otimes_4,
+        oast_1=oast_1,
+        oast_2=oast_2,
+        oast_3=oast_3,
+    )
+
+
+# --------------------------------------------------------------------------------------------
+# A.2.1 Piecewise-constant adaptation law, (A.13)-(A.19)
+# --------------------------------------------------------------------------------------------
+
+
+def _phi2(x: float) -> float:
+    """(e^x - 1 - x) / x^2 to full relative precision (series for small |x|)."""
+    if abs(x) < 1e-2:
+        # sum_{k>=0} x^k / (k+2)!; the x^8 term is below 1e-16 / 3.6e6 relative
+        term = 0.5
+        total = 0.5
+        for k in range(1, 9):
+            term *= x / (k + 2)
+            total += term
+        return total
+    return (math.expm1(x) - x) / (x * x)
+
+
+def _one_minus_ratio(omega: float, lambda_s: float, Ts: float) -> float:
+    """1 - (lambda_s/omega) (e^{omega Ts} - 1)/(e^{lambda_s Ts} - 1), without cancellation.
+
+    With e(x) = x + x^2 phi2(x): omega e(lambda_s T) - lambda_s e(omega T)
+    = omega lambda_s T^2 (lambda_s phi2(lambda_s T) - omega phi2(omega T)).
+    """
+    u = lambda_s * Ts
+    return lambda_s * Ts * Ts * (lambda_s * _phi2(u) - omega * _phi2(omega * Ts)) / math.expm1(u)
+
+
+@dataclass(frozen=True)
+class SamplingConstants:
+    """The piecewise-constant-law constants (A.13)-(A.17) of L1-DRAC at (p, omega, Ts, lambda_s).
+
+    ``envelope`` is True when the constants are the monotone envelope of
+    :func:`sampling_constants` (``e^{-lambda_s Ts} -> 1`` in (A.15), ``gamma_2 -> max(gamma_2, 1)``
+    in (A.13d), (A.14), (A.17)), which bounds the paper's values from above.
+    """
+
+    consts: L1Constants
+    p: int
+    omega: float
+    Ts: float
+    lambda_s: float
+    envelope: bool
+    gamma_1: float
+    gamma_1p: float
+    gamma_2: float
+    gamma_2p: float
+    gamma_pp: float
+    gamma_mu: float
+    gamma_mu_hat: float
+    gamma_sigma: float
+    gamma_sigma_hat: float
+    bar_1: float
+    bar_2: float
+    bar_3: float
+    mu_1: float
+    mu_2: float
+    mu_3: float
+    sigma_1: float
+    sigma_2: float
+    sigma_3: float
+    expm1_omega_Ts: float  # e^{omega Ts} - 1, used by (A.18c)
+    one_m_e2lam: float  # 1 - e^{-2 lambda Ts}, used by (A.19a)
+    one_m_e2omega: float  # 1 - e^{-2 omega Ts}, used by (A.13d), (A.19a)
+
+
+def sampling_constants(
+    c: L1Constants,
+    p: int,
+    omega: float,
+    Ts: float,
+    lambda_s: float,
+    *,
+    envelope: bool = False,
+) -> SamplingConstants:
+    """gamma's, bar-Delta's, Delta_mu's and Delta_sigma's; implements (A.13)-(A.17) of L1-DRAC.
+
+    Parameters
+    ----------
+    c
+        The paper's constants.
+    p
+        Moment order.
+    omega, Ts, lambda_s
+        Filter bandwidth, sampling period, predictor pole (all > 0).
+    envelope
+        If True, return the monotone upper envelope used by the T_s search of the designer:
+        ``e^{-lambda_s Ts}`` is replaced by 1 in (A.15) and gamma_2 by ``max(gamma_2, 1)`` in
+        (A.13d), (A.14) and (A.17). Every Upsilon map is a sum of products of non-negative factors,
+        each non-decreasing in these two replaced quantities, so the envelope maps are >= the
+        paper's maps; and every factor of the envelope is non-decreasing in Ts (proof in
+        :func:`drip_cert.bounds.l1drac.largest_Ts`).
+
+    Returns
+    -------
+    SamplingConstants
+    """
+    lam = c.lam
+    u = lambda_s * Ts
+    em1_u = math.expm1(u)  # e^{lambda_s Ts} - 1
+    em1_w = math.expm1(omega * Ts)  # e^{omega Ts} - 1
+    fp1 = frak_p_prime(p)
+    fp2 = frak_p_dprime(p)
+    # (A.13a): gamma_1 = (lambda_s (e^u + 1)/(e^u - 1))^{1/2};  Ts*gamma_1 kept separately
+    gamma_1 = math.sqrt(lambda_s * (2.0 + em1_u) / em1_u)
+    Ts_gamma_1 = math.sqrt(Ts * (2.0 + em1_u) * (u / em1_u))  # = Ts gamma_1, no overflow
+    one_m_e2lam = -math.expm1(-2.0 * lam * Ts)
+    one_m_ew = -math.expm1(-omega * Ts)
+    gamma_1p = one_m_e2lam * one_m_ew
+    # (A.13b): gamma_2 = max(e^{(omega-lambda_s)Ts}, 1) * R,  R = (ls/w)(e^{w Ts}-1)/(e^{ls Ts}-1)
+    one_m_R = _one_minus_ratio(omega, lambda_s, Ts)
+    R = 1.0 - one_m_R
+    e_diff = math.exp((omega - lambda_s) * Ts)
+    gamma_2 = max(e_diff, 1.0) * R
+    # (A.13c): |1 - e^{(w-ls)Ts} R| = |-(e^{(w-ls)Ts} - 1) + e^{(w-ls)Ts}(1 - R)|, both terms of
+    # one sign, so no cancellation
+    gamma_2p = max(
+        abs(-math.expm1((omega - lambda_s) * Ts) + e_diff * one_m_R),
+        abs(one_m_R),
+    )
+    g2 = max(gamma_2, 1.0) if envelope else gamma_2
+    one_m_e2omega = -math.expm1(-2.0 * omega * Ts)
+    # (A.13d)
+    gamma_pp = fp1 * gamma_2p + fp2 * math.sqrt(one_m_e2omega) * (2.0 + g2)
+    # (A.14a)-(A.14c)
+    gamma_mu = c.L_mu_par + c.L_mu * g2 * c.Delta_Theta
+    gamma_mu_hat = c.L_mu_par_hat + c.L_mu_hat * g2 * c.Delta_Theta
+    gamma_sigma = c.L_p_par + c.L_sigma_par + g2 * c.Delta_Theta * (c.L_p + c.L_sigma)
+    gamma_sigma_hat = (
+        c.L_p_par_hat + c.L_sigma_par_hat + g2 * c.Delta_Theta * (c.L_p_hat + c.L_sigma_hat)
+    )
+    # (A.15a)-(A.15c)
+    e_mu = 1.0 if envelope else math.exp(-u)  # e^{-lambda_s Ts}
+    gt = c.Delta_g * c.Delta_Theta * e_mu
+    ps = c.Delta_p + c.Delta_sigma
+    s2T = math.sqrt(2.0 * Ts)  # sqrt(2) sqrt(Ts)
+    bar_1 = (
+        2.0 * (Ts * (c.Delta_f + (1.0 + gt) * c.Delta_mu) + fp1 * gt * Ts_gamma_1 * ps)
+        + 2.0 * s2T * fp1 * ps
+    )
+    bar_2 = 2.0 * fp1 * c.Delta_sigma * (s2T + gt * Ts_gamma_1)
+    bar_3 = 2.0 * Ts * (c.Delta_f + (1.0 + gt) * c.Delta_mu)
+    # (A.16a)-(A.16c)
+    one_m_eu = -math.expm1(-u)  # 1 - e^{-lambda_s Ts}
+    mu_1 = Ts * gamma_mu_hat + bar_1 * gamma_mu + c.Delta_mu_par * one_m_eu
+    mu_2 = bar_2 * gamma_mu
+    mu_3 = Ts * gamma_mu * bar_3 + c.Delta_mu_par * one_m_eu
+    # (A.17a) -- ERRATUM note: (D.142b) carries a stray gamma'_sigma(omega, Ts), defined nowhere;
+    # Prop. D.11 has no such term, so (A.17a) is implemented as printed, without it.
+    lpar = c.L_p_par + c.L_sigma_par
+    lhat_par = c.L_p_par_hat + c.L_sigma_par_hat
+    sq_b1 = math.sqrt(bar_1)
+    sigma_1 = (lpar * sq_b1 + Ts * lhat_par) * (1.0 + g2) + (
+        gamma_sigma * sq_b1 + Ts * gamma_sigma_hat
+    )
+    # (A.17b)
+    bracket = gamma_sigma + (1.0 + g2) * lpar
+    sigma_2 = math.sqrt(bar_2) * bracket
+    sigma_3 = math.sqrt(bar_3) * bracket
+    return SamplingConstants(
+        consts=c,
+        p=p,
+        omega=omega,
+        Ts=Ts,
+        lambda_s=lambda_s,
+        envelope=envelope,
+        gamma_1=gamma_1,
+        gamma_1p=gamma_1p,
+        gamma_2=g2,
+        gamma_2p=gamma_2p,
+        gamma_pp=gamma_pp,
+        gamma_mu=gamma_mu,
+        gamma_mu_hat=gamma_mu_hat,
+        gamma_sigma=gamma_sigma,
+        gamma_sigma_hat=gamma_sigma_hat,
+        bar_1=bar_1,
+        bar_2=bar_2,
+        bar_3=bar_3,
+        mu_1=mu_1,
+        mu_2=mu_2,
+        mu_3=mu_3,
+        sigma_1=sigma_1,
+        sigma_2=sigma_2,
+        sigma_3=sigma_3,
+        expm1_omega_Ts=em1_w,
+        one_m_e2lam=one_m_e2lam,
+        one_m_e2omega=one_m_e2omega,
+    )
+
+
+def upsilon1_prime(xi: float, s: SamplingConstants) -> float:
+    """Upsilon'_1(xi; p, omega, Ts); implements (A.18a) of L1-DRAC."""
+    sw = math.sqrt(s.omega)
+    fp1 = frak_p_prime(s.p)
+    return (
+        s.mu_1
+        + sw * fp1 * s.sigma_1
+        + sw * fp1 * s.sigma_2 * xi**0.25
+        + (s.mu_2 + sw * fp1 * s.sigma_3) * math.sqrt(xi)
+        + s.mu_3 * xi
+    )
+
+
+def upsilon2_prime(xi: float, s: SamplingConstants) -> float:
+    """Upsilon'_2(xi; p, omega, Ts); implements (A.18b) of L1-DRAC."""
+    c = s.consts
+    return s.gamma_pp * (c.Delta_p_par + c.Delta_sigma_par * (1.0 + math.sqrt(xi)))
+
+
+def upsilon3_prime(xi: float, s: SamplingConstants) -> float:
+    """Upsilon'_3(xi) = Delta_mu^par (e^{omega Ts} - 1)(1 + xi); implements (A.18c) of L1-DRAC."""
+    return s.consts.Delta_mu_par * s.expm1_omega_Ts * (1.0 + xi)
+
+
+def upsilon_minus_tilde(xi: float, s: SamplingConstants) -> float:
+    """tilde-Upsilon^-(xi; p, omega, Ts); implements (A.19a) of L1-DRAC."""
+    c = s.consts
+    fp1 = frak_p_prime(s.p)
+    diff = c.Delta_p_par + c.Delta_sigma_par * (1.0 + math.sqrt(xi))
+    inner = math.sqrt(s.omega) * fp1 * math.sqrt(s.one_m_e2omega) * diff + c.Delta_mu_par * (
+        1.0 + xi
+    )
+    return s.one_m_e2lam * c.Delta_g * inner / c.lam
+
+
+def upsilon_minus(xi: float, s: SamplingConstants) -> float:
+    """Upsilon^-(xi; p, omega, Ts); implements (A.19b) of L1-DRAC."""
+    c = s.consts
+    fp1 = frak_p_prime(s.p)
+    diff = c.Delta_p_par + c.Delta_sigma_par * (1.0 + math.sqrt(xi))
+    return s.gamma_1p * (2.0 * fp1 * diff + c.Delta_mu_par * (1.0 + xi) / math.sqrt(s.omega))
+
+
+def upsilon_ring(xi: float, c: L1Constants, p: int, omega: float) -> float:
+    """ring-Upsilon(xi; p, omega); implements (A.19c) of L1-DRAC (independent of Ts)."""
+    fp1 = frak_p_prime(p)
+    return c.Delta_g**2 * (
+        fp1 * (c.L_p_par + c.L_sigma_par) * math.sqrt(xi) + c.L_mu_par * xi / math.sqrt(omega)
+    )
+
+
+# --------------------------------------------------------------------------------------------
+# Sec. 3.2: Gamma_r, Gamma_a (18b, c), Theta_r, Theta_a (22, 23), Upsilon_a (25a-c)
+# --------------------------------------------------------------------------------------------
+
+
+def _abs_gap(lam: float, omega: float) -> float:
+    """|2 lambda - omega| (the caller guarantees omega != 2 lambda)."""
+    return abs(2.0 * lam - omega)
+
+
+def gamma_r(rho_r: float, omega: float, rc: RefConstants) -> float:
+    """Gamma_r(rho_r, p, omega); implements (18b) of L1-DRAC.
+
+    Parameters
+    ----------
+    rho_r
+        The reference-process radius varrho_r(p) >= 0.
+    omega
+        Filter bandwidth, ``omega != 2 lambda``.
+    rc
+        :func:`reference_constants` at the same p.
+    """
+    lam = rc.lam
+    w = omega / _abs_gap(lam, omega)
+    sl = math.sqrt(lam)
+    r = rho_r + rc.Delta_star
+    return (
+        rc.circ_1 / (2 * lam)
+        + w * rc.circ_4
+        + (rc.ocirc_1 / (2 * lam) + w * rc.ocirc_4) * math.sqrt(r)
+        + (rc.odot_1 / (2 * lam) + w * rc.odot_8) * r
+        + (rc.odot_2 / (2 * lam) + rc.odot_3 / (2 * sl) + rc.oast_1 * rc.Delta_star / (2 * lam))
+        * rho_r
+        + rc.otimes_1 / (2 * sl) * r**1.5
+    )
+
+
+def gamma_a(rho_a: float, omega: float, tc: TrueConstants) -> float:
+    """Gamma_a(rho_a, p, omega); implements (18c) of L1-DRAC."""
+    lam = tc.lam
+    return (
+        tc.odot_1 / (2 * lam)
+        + omega * tc.odot_4 / _abs_gap(lam, omega)
+        + tc.otimes_1 / (2 * math.sqrt(lam)) * math.sqrt(rho_a)
+    ) * rho_a
+
+
+def theta_r(rho_r: float, omega: float, rc: RefConstants) -> float:
+    """Theta_r(rho_r, p, omega); implements (22) of L1-DRAC (NOT divided by |2 lambda - omega|)."""
+    sw = math.sqrt(omega)
+    r = rho_r + rc.Delta_star
+    sr = math.sqrt(r)
+    return (
+        rc.circ_2
+        + sw * rc.circ_3
+        + (rc.ocirc_2 + sw * rc.ocirc_3) * sr
+        + (rc.odot_4 + sw * rc.odot_6) * r
+        + (rc.odot_5 + sw * rc.odot_7) * rho_r
+        + ((rc.otimes_2 + sw * rc.otimes_4) * r + (rc.otimes_3 + sw * rc.otimes_5) * rho_r) * sr
+        + (rc.oast_2 * r + rc.oast_3 * rho_r) * r
+    )
+
+
+def theta_a(
+    rho_a: float, rho_r: float, omega: float, tc: TrueConstants, Delta_star: float
+) -> float:
+    """Theta_a(rho_a, rho_r, p, omega); implements (23) of L1-DRAC (NOT divided by |2lambda-omega|).
+
+    ``rho'' = rho_a + 2 (rho_r + Delta_star)`` as defined below (23).
+    """
+    sw = math.sqrt(omega)
+    rpp = rho_a + 2.0 * (rho_r + Delta_star)
+    return (
+        sw * tc.ocirc_1 + sw * tc.otimes_3 * rpp + (tc.otimes_2 + sw * tc.otimes_4) * rho_a
+    ) * math.sqrt(rho_a) + (
+        tc.odot_2 + sw * tc.odot_3 + tc.oast_2 * rpp + tc.oast_3 * rho_a
+    ) * rho_a
+
+
+def upsilon_a1(xi1: float, xi2: float, s: SamplingConstants) -> float:
+    """Upsilon_{a_1}(xi1, xi2; p, omega, Ts); implements (25a) of L1-DRAC."""
+    c = s.consts
+    lam = c.lam
+    ring = upsilon_ring(xi2, c, s.p, s.omega)
+    return upsilon_minus_tilde(xi1, s) * xi2 + s.omega / (
+        lam * _abs_gap(lam, s.omega)
+    ) * ring * upsilon_minus(xi1, s)
+
+
+def upsilon_a2(xi1: float, xi2: float, s: SamplingConstants) -> float:
+    """Upsilon_{a_2}(xi1, xi2; p, omega, Ts); implements (25b) of L1-DRAC."""
+    c = s.consts
+    lam = c.lam
+    sw = math.sqrt(s.omega)
+    ring = upsilon_ring(xi2, c, s.p, s.omega)
+    return (
+        (c.Delta_g * xi2 + sw / _abs_gap(lam, s.omega) * ring)
+        * (upsilon1_prime(xi1, s) + sw * upsilon2_prime(xi1, s))
+        / lam
+    )
+
+
+def upsilon_a3(xi1: float, xi2: float, s: SamplingConstants) -> float:
+    """Upsilon_{a_3}(xi1, xi2; p, omega, Ts); implements (25c) of L1-DRAC."""
+    c = s.consts
+    lam = c.lam
+    sw = math.sqrt(s.omega)
+    ring = upsilon_ring(xi2, c, s.p, s.omega)
+    return (
+        (2.0 * c.Delta_g * xi2 + sw / lam * ring) * upsilon3_prime(xi1, s) / _abs_gap(lam, s.omega)
+    )
+
+
+def upsilon_sum(xi1: float, xi2: float, s: SamplingConstants) -> float:
+    """sum_{i=1}^3 Upsilon_{a_i}(xi1, xi2); the left side of (24) of L1-DRAC.
+
+    (24) evaluates it at ``xi1 = rho'(p) = rho_a + rho_r + Delta_star`` and ``xi2 = rho_a``.
+    """
+    return upsilon_a1(xi1, xi2, s) + upsilon_a2(xi1, xi2, s) + upsilon_a3(xi1, xi2, s)
