@@ -140,9 +140,9 @@ class Certificate:
     contraction_expert: ContractionAnalysis
     contraction_learned: ContractionAnalysis | None
     delta_iss: Any | None  # drip_cert.analysis.iss.DeltaISSResult
-    l1drac: Any | None = None  # drip_cert.bounds.l1drac.L1Design
-    l1_constants: Mapping[str, Quantity] = field(default_factory=dict)
+    l1: Any | None = None  # drip_cert.bounds.l1_system.L1Section
     tasil: Any | None = None  # drip_cert.bounds.tasil.TasilCertificate
+    tasil_provenance: Mapping[str, Any] = field(default_factory=dict)
     notes: tuple[str, ...] = ()
 
     @property
@@ -162,14 +162,16 @@ class Certificate:
         if self.contraction_learned is not None:
             q = self.contraction_learned.euclidean.to_quantity()
             qs.append(Quantity("lambda_learned", q.value, q.how, "L1-DRAC Assumption 2", q.note))
-        qs.extend(self.l1_constants.values())
+        if self.l1 is not None:
+            have = {q.name for q in qs}
+            qs.extend(q for q in self.l1.constants.values() if q.name not in have)
         return qs
 
     @property
     def rho_l1(self) -> float | None:
-        if self.l1drac is None or not self.l1drac.feasible:
+        if self.l1 is None or not self.l1.feasible:
             return None
-        return float(self.l1drac.rho)
+        return float(self.l1.design.rho)
 
     @property
     def rho_tasil(self) -> float | None:
@@ -223,8 +225,9 @@ class Certificate:
             "input_operator": self.inputs.to_dict(),
             "contraction": contraction,
             "delta_iss": diss,
-            "l1drac": None if self.l1drac is None else self.l1drac.to_dict(),
-            "tasil": None if self.tasil is None else self.tasil.to_dict(),
+            "l1drac": None if self.l1 is None else self.l1.to_dict(),
+            "tasil": None if self.tasil is None else {**self.tasil.to_dict(),
+                                                      "provenance": dict(self.tasil_provenance)},
             "rho": rho,
             "notes": list(self.notes),
         }
@@ -303,9 +306,46 @@ def certify(spec: Spec, *, tasil: Any | None = None) -> Certificate:
     else:
         notes.append("no delta-ISS gain: the expert closed loop is not shown to contract")
 
+    tasil_prov: dict[str, Any] = {}
+    if tasil is None and s.learned is not None and "tasil" in spec.tables and diss is not None:
+        from drip_cert.learn.workflow import demonstrations, tasil_section, tasil_settings
+
+        st = tasil_settings(spec.table("tasil"))
+        train = demonstrations(s, st.trajectories, st.samples, st.seed, 0)
+        held = demonstrations(s, st.heldout, st.samples, st.seed, 1) if st.heldout else None
+        gamma0 = Quantity("gamma0", diss.tight_gain_asymptotic, diss.how,
+                          "delta-ISS gain (comparison lemma)", "||g||_2 / lambda")
+        tasil, tasil_prov = tasil_section(s, train, held, gamma0,
+                                          r.region.startswith("all"), st,
+                                          method=f"{st.method}-{st.order}")
+    if tasil is not None:
+        ok = tasil.rho is not None and math.isfinite(tasil.rho)
+        checks.append(Check(
+            id="TaSIL", holds=ok,
+            detail=("rho_TaSIL = " + (f"{tasil.rho:.6g}" if ok else "inf")
+                    + f" ({tasil.rho_form}); deterministic gap bound over the given initial "
+                    f"states {tasil.gap_bound:.6g}" + ("" if ok else f"; {tasil.gap_reason}")),
+            lhs=float(tasil.rho) if ok else math.inf, rhs=math.inf, margin=math.nan,
+            source="math/tasil.md sections 3-4 (this project's construction)", how=How.SOUND))
+    l1 = None
+    if "l1drac" in spec.tables:
+        from drip_cert.bounds.l1_system import l1_section
+
+        src = cl if cl is not None else ce
+        l1 = l1_section(s, spec.table("l1drac"), given, src.euclidean.to_quantity(),
+                        src.euclidean.region.startswith("all"), src.policy,
+                        {q.name: q for q in ic.quantities()}, uc.values)
+        checks.append(Check(
+            id="L1DRAC-design", holds=l1.feasible,
+            detail=("feasible design: " + ", ".join(
+                f"{k} = {l1.design.to_dict()[k]:.6g}" for k in ("omega", "lambda_s", "Ts",
+                                                                "rho_r", "rho_a", "rho"))
+                    if l1.feasible else "no feasible design: "
+                    + (l1.design.reason if l1.design is not None else l1.error)),
+            source="L1-DRAC (16), (21), (24)", how=How.EXACT))
     return Certificate(system=s, assumptions=tuple(checks), inputs=ic, uncertainty=uc,
                        contraction_expert=ce, contraction_learned=cl, delta_iss=diss,
-                       tasil=tasil, notes=tuple(notes))
+                       l1=l1, tasil=tasil, tasil_provenance=tasil_prov, notes=tuple(notes))
 
 
 def _fmt(x: float | None) -> str:

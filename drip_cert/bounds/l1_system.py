@@ -1,0 +1,172 @@
+"""L1-DRAC for a :class:`~drip_cert.system.System`: the constants a system determines plus the
+user's design inputs (spec table ``[l1drac]``), then the designer of
+:mod:`drip_cert.bounds.l1drac`.
+
+System-determined constants (with provenance): ``lambda`` (contraction rate of the closed loop
+under the learned policy, the nominal system of DRIP's L1-DRAC layer; the expert's when no learned
+policy is given), ``Delta_g``, ``Delta_g_dot``, ``Delta_g_perp``, ``Delta_Theta``, ``m``, the
+uncertainty and known-diffusion constants and their matched/unmatched parts, ``Delta_f``, ``L_f``
+and ``Delta_star``. Time-Lipschitz constants (the hats) are 0 for time-invariant terms; for
+time-varying ones they are sampled estimates. User inputs: ``p`` (default 1), ``lambda_s``,
+``omega``, ``Ts``, ``rho_r``, ``rho_a``, ``delta``, ``alpha`` (default 0: the identity coupling
+``D = D_bar``; otherwise the largest distance between the two support boxes, a sound bound on any
+coupling's ``W_{2p}``), ``eps_r``, ``eps_a`` (default 1e-3, the slacks of (16)), ``p_star``
+(default ``p``), and any constant override in ``[constants]``.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from drip_cert.errors import AssumptionViolation, SpecError
+from drip_cert.provenance import How, Quantity
+from drip_cert.system.system import System
+
+L1_KEYS = {"p", "lambda_s", "omega", "Ts", "rho_r", "rho_a", "delta", "alpha", "eps_r", "eps_a",
+           "p_star", "lip_f"}
+DEFAULT_EPS = 1e-3  #: default slacks eps_r, eps_a of (16a), (16b)
+
+
+@dataclass(frozen=True)
+class L1Section:
+    """The L1-DRAC part of a certificate: constants used, the design, or why there is none."""
+
+    constants: Mapping[str, Quantity]
+    design: Any | None  # drip_cert.bounds.l1drac.L1Design
+    error: str = ""
+    tradeoff: tuple = ()  #: (rho_a, Ts_max, rho) rows at the design's omega and lambda_s
+
+    @property
+    def feasible(self) -> bool:
+        return self.design is not None and bool(self.design.feasible)
+
+    def to_dict(self) -> dict[str, Any]:
+        out: dict[str, Any] = {} if self.design is None else dict(self.design.to_dict())
+        if self.design is None:
+            out.update(feasible=False, reason=self.error)
+        out["constants_used"] = {k: q.to_dict() for k, q in self.constants.items()}
+        out["tradeoff"] = [{"rho_a": r.rho_a, "Ts_max": r.Ts_max, "rho": r.rho}
+                           for r in self.tradeoff]
+        return out
+
+
+def _num(table: Mapping[str, Any], key: str, default: Any, positive: bool = True) -> Any:
+    v = table.get(key, default)
+    if v is None:
+        return None
+    if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(float(v)) or (
+            positive and not float(v) > 0) or float(v) < 0:
+        raise SpecError(f"must be a finite number {'> 0' if positive else '>= 0'}, got {v!r}",
+                        field=f"l1drac.{key}")
+    return float(v)
+
+
+def l1_section(s: System, table: Mapping[str, Any], given: Mapping[str, Any],
+               lam: Quantity, global_rate: bool, which: str,
+               input_q: Mapping[str, Quantity], unc_q: Mapping[str, Quantity]) -> L1Section:
+    """Assemble the L1-DRAC constants of ``s`` and run the designer.
+
+    Parameters
+    ----------
+    table
+        The spec's ``[l1drac]`` table.
+    given
+        The spec's ``[constants]`` table (overrides, labelled ``given``).
+    lam
+        Contraction rate of the closed loop under ``which`` policy.
+    global_rate
+        Whether ``lam`` holds on all of ``R^n``.
+    input_q, unc_q
+        Input-operator and uncertainty quantities by name.
+    """
+    from drip_cert.analysis.closed_loop import closed_loop_constants
+    from drip_cert.bounds.l1drac import DesignRequest, L1Constants, design
+
+    extra = set(table) - L1_KEYS
+    if extra:
+        raise SpecError(f"unknown key(s) {sorted(extra)}; allowed {sorted(L1_KEYS)}",
+                        field="l1drac")
+    p = table.get("p", 1)
+    if isinstance(p, bool) or not isinstance(p, int) or p < 1:
+        raise SpecError(f"must be a positive integer, got {p!r}", field="l1drac.p")
+    p_star = table.get("p_star", p)
+    if isinstance(p_star, bool) or not isinstance(p_star, int) or p_star < p:
+        raise SpecError(f"must be an integer >= p = {p}, got {p_star!r}", field="l1drac.p_star")
+    q: dict[str, Quantity] = {}
+    if lam.value <= 0:
+        return L1Section({"lambda": lam}, None,
+                         f"the {which} closed loop is not shown to contract (lambda = "
+                         f"{lam.value:.6g}): L1-DRAC Assumption 2 fails, no design")
+    q["lambda"] = Quantity("lambda", lam.value, lam.how, "L1-DRAC Assumption 2 (" + which
+                           + " closed loop)", lam.note)
+    cl = closed_loop_constants(s, which, lam, global_rate)
+    for qq in cl.quantities():
+        q[qq.name] = qq
+    for name in ("Delta_g", "Delta_g_dot", "Delta_g_perp", "Delta_Theta"):
+        q[name] = input_q[name]
+    for name, qq in unc_q.items():
+        q[name] = qq
+    # time-Lipschitz constants (hats): zero for time-invariant terms
+    t_free = not any(s.t in e.free_symbols for mat in (s.lambda_mu, s.lambda_sigma, s.diffusion)
+                     if mat is not None for e in mat)
+    for name in ("L_p_hat", "L_p_par_hat", "L_p_perp_hat", "L_mu_hat", "L_mu_par_hat",
+                 "L_mu_perp_hat", "L_sigma_hat", "L_sigma_par_hat", "L_sigma_perp_hat"):
+        q[name] = Quantity(name, 0.0 if t_free else math.nan,
+                           How.EXACT if t_free else How.ESTIMATE, "L1-DRAC Assumptions 1, 5, 6",
+                           "time-invariant terms" if t_free else
+                           "time-varying terms: give this constant in [constants]")
+    if "Delta_star" in table:
+        raise SpecError("give Delta_star in [constants], not in [l1drac]", field="l1drac")
+    alpha_default = 0.0
+    alpha_note = "identity coupling D = D_bar (same initial state): W_2p = 0"
+    if s.true_support is not None:
+        a = np.array(s.support)
+        b = np.array(s.true_support)
+        far = np.maximum(np.abs(a[:, 1] - b[:, 0]), np.abs(b[:, 1] - a[:, 0]))
+        alpha_default = float(np.linalg.norm(far))
+        alpha_note = "largest distance between the supports of D and D_bar (any coupling)"
+    q["alpha"] = Quantity("alpha", _num(table, "alpha", alpha_default, positive=False),
+                          How.GIVEN if "alpha" in table else How.SOUND, "L1-DRAC (18a)",
+                          "given in [l1drac]" if "alpha" in table else alpha_note)
+    for key in ("eps_r", "eps_a"):
+        q[key] = Quantity(key, _num(table, key, DEFAULT_EPS), How.GIVEN, "L1-DRAC (16)",
+                          "user slack" + ("" if key in table else f" (default {DEFAULT_EPS})"))
+    for name, v in given.items():
+        if name in q:
+            if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
+                raise SpecError(f"must be a finite number, got {v!r}", field=f"constants.{name}")
+            q[name] = Quantity(name, float(v), How.GIVEN, q[name].source, "given in [constants]")
+    lip_f = table.get("lip_f")
+    if lip_f is None:
+        lip_f = math.isfinite(q["L_f"].value)
+    if not isinstance(lip_f, bool):
+        raise SpecError(f"must be true or false, got {lip_f!r}", field="l1drac.lip_f")
+    bad = [k for k, v in q.items() if not math.isfinite(v.value)]
+    if bad:
+        return L1Section(q, None, "constants without a finite value: " + ", ".join(
+            f"{k} ({q[k].note})" for k in bad) + "; give them in [constants]")
+    values = {k: v.value for k, v in q.items()}
+    values["lambda"] = values.pop("lambda")
+    values.update(p_star=int(p_star), m=s.m, lip_f=bool(lip_f))
+    if not lip_f:
+        values["L_f"] = 0.0
+    try:
+        consts = L1Constants.from_mapping(values)
+    except AssumptionViolation as exc:
+        return L1Section(q, None, str(exc))
+    req = DesignRequest(p=int(p), lambda_s=_num(table, "lambda_s", None),
+                        omega=_num(table, "omega", None), Ts=_num(table, "Ts", None),
+                        rho_r=_num(table, "rho_r", None), rho_a=_num(table, "rho_a", None),
+                        delta=_num(table, "delta", None))
+    d = design(consts, req)
+    rows: tuple = ()
+    if d.feasible:
+        from drip_cert.bounds.l1drac import tradeoff_table
+
+        rows = tuple(tradeoff_table(consts, d.p, d.omega, d.lambda_s))
+    return L1Section(q, d, tradeoff=rows)
