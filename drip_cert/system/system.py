@@ -257,6 +257,15 @@ class System:
         """jax callables of every part of the system (built once, lazily)."""
         return NumericSystem.build(self)
 
+    def sim_model(self):
+        """The :class:`~drip_cert.sim.model.SimModel` of this system for the Monte-Carlo engine."""
+        from drip_cert.sim.model import SimModel
+
+        num = self.numeric
+        return SimModel(n=self.n, m=self.m, d=self.d, f=num.f, g=num.g, p=num.p,
+                        lam_mu=num.lam_mu, lam_sigma=num.lam_sigma, expert=num.expert,
+                        learned=num.learned, theta_ad=num.theta_ad, name=self.name)
+
     def with_learned(self, learned: Sequence[sp.Expr] | sp.MatrixBase,
                      blocks: Mapping[str, Block] | None = None) -> System:
         """A copy with the learned policy replaced (and blocks added)."""
