@@ -1,0 +1,73 @@
+"""drip-cert: certificates for DRIP (TaSIL imitation policy + L1-DRAC adaptive control).
+
+The public API is re-exported here explicitly (and imported lazily, so that ``import drip_cert``
+and the command line stay fast): every name of :data:`__all__` maps to the module defining it.
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import Any
+
+__version__ = "0.1.0"
+
+_EXPORTS: dict[str, str] = {
+    # errors and provenance
+    "DripCertError": "drip_cert.errors",
+    "SpecError": "drip_cert.errors",
+    "AssumptionViolation": "drip_cert.errors",
+    "InfeasibleDesign": "drip_cert.errors",
+    "SolverError": "drip_cert.errors",
+    "Quantity": "drip_cert.provenance",
+    "Check": "drip_cert.provenance",
+    "How": "drip_cert.provenance",
+    # describing a system
+    "System": "drip_cert.system.system",
+    "Spec": "drip_cert.system.spec",
+    "load_spec": "drip_cert.system.spec",
+    "Block": "drip_cert.system.blocks",
+    "mlp_block": "drip_cert.system.blocks",
+    "MLP": "drip_cert.learn.mlp",
+    "load_mlp": "drip_cert.learn.mlp",
+    # analysis
+    "input_constants": "drip_cert.analysis.constants",
+    "uncertainty_constants": "drip_cert.analysis.constants",
+    "contraction_rate": "drip_cert.analysis.contraction",
+    "contraction_metric": "drip_cert.analysis.lmi",
+    "delta_iss": "drip_cert.analysis.iss",
+    "mu_1": "drip_cert.analysis.lognorm",
+    "mu_2": "drip_cert.analysis.lognorm",
+    "mu_inf": "drip_cert.analysis.lognorm",
+    # bounds
+    "certify": "drip_cert.bounds.certificate",
+    "Certificate": "drip_cert.bounds.certificate",
+    "L1Constants": "drip_cert.bounds.l1drac",
+    "DesignRequest": "drip_cert.bounds.l1drac",
+    "design": "drip_cert.bounds.l1drac",
+    "tradeoff_table": "drip_cert.bounds.l1drac",
+    "tasil_certificate": "drip_cert.bounds.tasil",
+    # learning, control, simulation, validation
+    "train_policy": "drip_cert.learn.tasil",
+    "generate_demonstrations": "drip_cert.learn.data",
+    "train_on_system": "drip_cert.learn.workflow",
+    "learned_system": "drip_cert.learn.workflow",
+    "L1Params": "drip_cert.control.l1drac",
+    "SimConfig": "drip_cert.sim.engine",
+    "simulate": "drip_cert.sim.engine",
+    "SimModel": "drip_cert.sim.model",
+    "validate": "drip_cert.validate",
+    "reproduce": "drip_cert.workflows",
+}
+
+__all__ = sorted(_EXPORTS) + ["__version__"]
+
+
+def __getattr__(name: str) -> Any:
+    module = _EXPORTS.get(name)
+    if module is None:
+        raise AttributeError(f"module 'drip_cert' has no attribute {name!r}")
+    return getattr(importlib.import_module(module), name)
+
+
+def __dir__() -> list[str]:
+    return __all__
