@@ -12,8 +12,9 @@ Each constant is a :class:`~drip_cert.provenance.Quantity` that records how it w
   matched/unmatched parts of L1-DRAC (7), ``L_mu``, the 1/2-Hoelder ``L_sigma``): the paper asks
   for bounds over all of ``R^n``. When an uncertainty depends on the state only through
   ``r = ||x||`` (as in the paper's example), the supremum reduces to one dimension and is
-  computed soundly (see :mod:`drip_cert.analysis.radial`); otherwise it is a sampled estimate over
-  a large region, labelled ``estimate``, and the certificate lists it as such. A value the user
+  computed soundly; so is any uncertainty bounded on all of ``R^n`` or globally Lipschitz (see
+  :mod:`drip_cert.analysis.growth` for the routes); otherwise it is a sampled estimate over a
+  large region, labelled ``estimate``, and the certificate lists it as such. A value the user
   gives in the ``[constants]`` table is taken as given.
 """
 
@@ -228,13 +229,9 @@ def uncertainty_constants(
     given = dict(given or {})
     n, m = s.n, s.m
     times = np.array([0.0]) if not _depends_on_t(s) else np.linspace(0.0, s.horizon, 9)
-    how_t = "" if len(times) == 1 else f"; t sampled at 9 points of [0, {s.horizon}]"
     th = theta_ad_symbolic(s)
     gp = g_perp_at(s, 0.0)
     out: dict[str, Quantity] = {}
-    note = ("sampled over spheres of radii " + ", ".join(f"{r:g}" for r in SAMPLE_RADII)
-            + f" ({SAMPLES_PER_RADIUS} directions each, seed {SAMPLE_SEED}); the paper asks for a "
-            "bound over all x: this is an estimate, not a bound" + how_t)
 
     def put(name: str, value: float, how: How, source: str, nt: str) -> None:
         if name in given:
@@ -280,19 +277,28 @@ def uncertainty_constants(
         full = sp.Matrix(mat)
         par = sp.Matrix(th) * full
         perp = sp.Matrix(gp.T) * full if n > m else None
+        from drip_cert.analysis.growth import growth_bound, holder_half_bound, lipschitz_bound
+
+        t_sym = s.t if len(times) > 1 else None
+        t_rng = (0.0, float(s.horizon)) if len(times) > 1 else (0.0, 0.0)
         for sub, expr in (("", full), ("_par", par), ("_perp", perp)):
             if expr is None:
                 put(f"Delta_{key}{sub}", 0.0, How.EXACT, growth_src + " / (7)", "m = n: no "
                     "unmatched part")
                 put(f"L_{key}{sub}", 0.0, How.EXACT, lip_src, "m = n: no unmatched part")
                 continue
-            fn = batch_fn(s, expr)
-            D, _ = growth_ratio_estimate(fn, n, power, times)
-            L = holder_estimate(fn, n, lip_exp, times)
-            put(f"Delta_{key}{sub}", D, How.ESTIMATE, growth_src + (" / (7)" if sub else ""),
-                note)
-            put(f"L_{key}{sub}", L, How.ESTIMATE, lip_src,
-                ("Lipschitz" if lip_exp == 1 else "1/2-Hoelder") + " ratio " + note)
+            ev = batch_fn(s, expr) if s.blocks else None
+            src = growth_src + (" / (7)" if sub else "")
+            D = growth_bound(expr, s.states, t_sym, t_rng, power, f"Delta_{key}{sub}",
+                             source=src, evaluate=ev)
+            put(D.name, D.value, D.how, src, D.note)
+            if lip_exp == 1.0:
+                L = lipschitz_bound(expr, s.states, t_sym, t_rng, f"L_{key}{sub}",
+                                    source=lip_src, evaluate=ev)
+            else:
+                L = holder_half_bound(expr, s.states, t_sym, t_rng, f"L_{key}{sub}",
+                                      source=lip_src, evaluate=ev)
+            put(L.name, L.value, L.how, lip_src, L.note)
     return UncertaintyConstants(values=out)
 
 

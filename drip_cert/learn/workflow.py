@@ -196,7 +196,7 @@ def jacobian_lipschitz(s: System, which: str) -> Quantity:
     # sampled estimate of sup ||Hessian||_F on the support box enlarged by 1
     from drip_cert._jax import jax, jnp
 
-    fn = s.lower(pol)
+    fn = s.lower(list(pol))
     hess = jax.jit(jax.vmap(jax.hessian(lambda z: fn(0.0, z))))
     rng = np.random.default_rng(0)
     box = np.array(s.support)

@@ -37,7 +37,8 @@ def lower(
     Parameters
     ----------
     exprs
-        A sympy matrix (any shape) or a flat sequence of expressions.
+        A sympy matrix (the function returns arrays of its shape, ``(n, 1)`` included) or a
+        flat sequence of expressions (the function returns a vector).
     t, states
         The time symbol and the state symbols, in order.
     blocks
@@ -50,8 +51,9 @@ def lower(
     """
     from drip_cert._jax import jnp
 
-    mat = sp.Matrix(exprs) if not isinstance(exprs, sp.MatrixBase) else sp.Matrix(exprs)
-    shape = mat.shape
+    is_matrix = isinstance(exprs, sp.MatrixBase)
+    mat = sp.Matrix(exprs)
+    shape = mat.shape if is_matrix else (len(mat),)
     flat = list(mat)
     states = tuple(states)
     placeholders: list[sp.Symbol] = []
@@ -104,7 +106,7 @@ def lower(
                 vals[pos] = r[(j, *deriv)]
         out = main(tt, *xs, *vals)
         arr = jnp.stack(jnp.broadcast_arrays(*[jnp.asarray(o, dtype=jnp.float64) for o in out]))
-        return arr.reshape(shape) if shape[1] != 1 else arr.reshape(shape[0])
+        return arr.reshape(shape)
 
     return fn
 

@@ -369,15 +369,15 @@ class NumericSystem:
         from drip_cert._jax import jnp
 
         n, d = s.n, s.d
-        f = s.lower(s.f)
+        f = s.lower(list(s.f))
         g_fn = s.lower(s.g)
         p = s.lower(s.diffusion)
-        lam_mu = (s.lower(s.lambda_mu) if s.lambda_mu is not None
+        lam_mu = (s.lower(list(s.lambda_mu)) if s.lambda_mu is not None
                   else (lambda t, x: jnp.zeros(n)))
         lam_sigma = (s.lower(s.lambda_sigma) if s.lambda_sigma is not None
                      else (lambda t, x: jnp.zeros((n, d))))
-        exp_fn = s.lower(s.expert)
-        learned = None if s.learned is None else s.lower(s.learned)
+        exp_fn = s.lower(list(s.expert))
+        learned = None if s.learned is None else s.lower(list(s.learned))
         jac_e = s.lower(s.closed_loop_jacobian("expert"))
         jac_l = None if s.learned is None else s.lower(s.closed_loop_jacobian("learned"))
 
