@@ -1,0 +1,563 @@
+"""Euclidean contraction rate of a closed loop: DRIP Assumption 2.
+
+DRIP Assumption 2 (eq. ``eqn:ILFConditions``) asks for a known ``lambda > 0`` with
+``mu_2(d/dx Fbar(t, x, pi*(x))) <= -lambda`` for **all** ``(t, x)``, ``mu_2`` the log norm induced
+by the Euclidean norm. :func:`contraction_rate` returns the largest ``lambda`` it can establish:
+
+* ``'exact-linear'``: the Jacobian is a constant matrix (linear or affine closed loop):
+  ``lambda = -mu_2(J)`` exactly, for all ``x`` and ``t``.
+* ``'interval-bnb'``: a *sound* lower bound on the rate over a box of states (and a time range):
+  rigorous interval enclosures of the Jacobian entries on sub-boxes
+  (:class:`~drip_cert.analysis.interval.MatrixEnclosure`), a rigorous Rohn-type bound of ``mu_2`` of
+  the interval matrix (:func:`~drip_cert.analysis.lognorm.mu2_interval_upper`), and branch and bound
+  that splits the worst sub-box along its widest (relative) side until the global upper bound is
+  within ``tol`` of the best sampled value or the box budget is spent. A Jacobian that depends on
+  ``t`` only is treated the same way over the time range, and then holds for all ``x``.
+* ``'sampled'``: dense grid + random points + local maximisation (scipy L-BFGS-B). This is an
+  **estimate** (:attr:`How.ESTIMATE`), never a bound; it is what is left when an expression has no
+  rigorous enclosure (an undefined function without an ``enclose`` callback).
+
+A box is weaker than the paper's "for all x": the rate then holds only while trajectories stay in
+the box; the result's ``region`` says so.
+"""
+
+from __future__ import annotations
+
+import heapq
+import math
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import sympy as sp
+from scipy.optimize import minimize
+
+from drip_cert.analysis.interval import (
+    EncloseCallback,
+    MatrixEnclosure,
+    UnsupportedExpression,
+    opaque_functions,
+)
+from drip_cert.analysis.lognorm import mu2_interval_upper, mu_2
+from drip_cert.errors import SolverError, SpecError
+from drip_cert.provenance import How, Quantity, json_float
+
+__all__ = [
+    "ContractionResult",
+    "SamplingOptions",
+    "contraction_rate",
+    "sampled_max_mu2",
+    "jacobian_function",
+    "DEFAULT_TOL",
+    "DEFAULT_MAX_BOXES",
+    "DEFAULT_MAX_TIME_S",
+]
+
+#: absolute tolerance on the gap (sound upper bound - sampled max) of ``mu_2``
+DEFAULT_TOL = 1e-3
+#: budget of sub-boxes for branch and bound
+DEFAULT_MAX_BOXES = 20_000
+#: wall-time budget of branch and bound (about 1-5 ms per sub-box for n = 2..4 in pure Python)
+DEFAULT_MAX_TIME_S = 30.0
+
+JacobianFn = Callable[[np.ndarray, np.ndarray], np.ndarray]
+
+_SOURCE = "DRIP Assumption 2 (eqn:ILFConditions), Euclidean log norm"
+_METHODS = ("auto", "exact-linear", "interval-bnb", "sampled")
+
+
+@dataclass(frozen=True)
+class SamplingOptions:
+    """How the sampled estimate of ``max mu_2`` is computed.
+
+    Parameters
+    ----------
+    n_grid
+        Approximate number of grid points (odd count per side so the centre is on the grid).
+    n_random
+        Uniform random points in the box.
+    n_local
+        Local maximisations (L-BFGS-B) started from the best grid/random points.
+    seed
+        Seed of the ``np.random.Generator`` used for the random points.
+    """
+
+    n_grid: int = 4096
+    n_random: int = 2048
+    n_local: int = 5
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        for name in ("n_grid", "n_random", "n_local"):
+            if getattr(self, name) < 0:
+                raise SpecError(f"must be >= 0, got {getattr(self, name)}", field=name)
+
+
+@dataclass(frozen=True)
+class ContractionResult:
+    """Contraction rate ``lambda`` with ``mu_2(J) <= -lambda`` on ``region``.
+
+    Attributes
+    ----------
+    rate
+        The rate; ``<= 0`` when Assumption 2 is not established (for ``how == SOUND`` it is
+        ``-max_mu_upper``, for ``ESTIMATE`` it is ``-max_mu_sampled``).
+    how
+        ``EXACT`` (constant Jacobian), ``SOUND`` (interval branch and bound or verified LMI),
+        ``ESTIMATE`` (sampled).
+    method
+        ``'exact-linear'``, ``'interval-bnb'``, ``'sampled'`` or ``'lmi-metric'``.
+    region
+        Where the rate holds: ``'all x, all t'``, or ``'box [...] x t in [...]'`` (weaker than the
+        paper's "for all x").
+    max_mu_upper
+        Sound upper bound on ``max mu_2(J)`` over the region (NaN for an estimate).
+    max_mu_sampled
+        Largest sampled ``mu_2(J)`` (a lower bound on the true maximum up to rounding).
+    witness
+        ``(x..., t)`` where the sampled ``mu_2`` is largest (NaN-free; ``None`` if not sampled).
+    tolerance
+        Requested gap ``max_mu_upper - max_mu_sampled``.
+    n_boxes
+        Sub-boxes evaluated by branch and bound.
+    time_s
+        Wall time.
+    note
+        Free text (why a fallback happened, whether the gap met the tolerance, ...).
+    """
+
+    rate: float
+    how: How
+    method: str
+    region: str
+    max_mu_upper: float
+    max_mu_sampled: float
+    witness: tuple[float, ...] | None
+    tolerance: float
+    n_boxes: int
+    time_s: float
+    note: str = ""
+
+    @property
+    def holds(self) -> bool:
+        """Whether Assumption 2 is established (``rate > 0``) by this result's method."""
+        return self.rate > 0
+
+    @property
+    def gap(self) -> float:
+        """``max_mu_upper - max_mu_sampled`` (NaN for an estimate)."""
+        return self.max_mu_upper - self.max_mu_sampled
+
+    def to_quantity(self) -> Quantity:
+        """The rate as a :class:`~drip_cert.provenance.Quantity` named ``lambda``."""
+        return Quantity(
+            "lambda",
+            self.rate,
+            self.how,
+            _SOURCE,
+            f"{self.method} on {self.region}. {self.note}".strip(),
+        )
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready dictionary."""
+        return {
+            "rate": json_float(self.rate),
+            "how": How(self.how).value,
+            "method": self.method,
+            "region": self.region,
+            "max_mu_upper": json_float(self.max_mu_upper),
+            "max_mu_sampled": json_float(self.max_mu_sampled),
+            "witness": None if self.witness is None else [float(w) for w in self.witness],
+            "tolerance": json_float(self.tolerance),
+            "n_boxes": int(self.n_boxes),
+            "time_s": float(self.time_s),
+            "note": self.note,
+            "holds": self.holds,
+        }
+
+
+# --------------------------------------------------------------------------------------------
+# input validation
+# --------------------------------------------------------------------------------------------
+
+
+def _check_inputs(J, states, box, t, t_range):
+    if not isinstance(J, sp.MatrixBase) or J.shape[0] != J.shape[1]:
+        raise SpecError(f"J must be a square sympy Matrix, got {type(J).__name__}", field="J")
+    n = J.shape[0]
+    states = tuple(states)
+    if len(states) != n:
+        raise SpecError(f"{len(states)} state symbols for a {n}x{n} Jacobian", field="states")
+    allowed = set(states) | ({t} if t is not None else set())
+    extra = J.free_symbols - allowed
+    if extra:
+        raise SpecError(
+            f"J contains symbols {sorted(map(str, extra))} that are neither states nor the time "
+            "symbol; substitute parameter values first",
+            field="J",
+        )
+    if box is not None:
+        box = np.asarray(box, dtype=float)
+        if box.shape != (n, 2) or not np.all(np.isfinite(box)) or np.any(box[:, 0] > box[:, 1]):
+            raise SpecError(
+                f"box must be a finite (n, 2) = ({n}, 2) array with lo <= hi per row, got {box!r}",
+                field="box",
+            )
+    if t_range is not None:
+        a, b = (float(v) for v in t_range)
+        if not (math.isfinite(a) and math.isfinite(b) and a <= b):
+            raise SpecError(f"t_range must be finite with lo <= hi, got {t_range}", field="t_range")
+        t_range = (a, b)
+    return n, states, box, t_range
+
+
+def _region(box: np.ndarray | None, t_range, depends_t: bool) -> str:
+    if box is None:
+        return "all x, all t" if not depends_t else f"all x, t in [{t_range[0]}, {t_range[1]}]"
+    xs = f"box {np.asarray(box).tolist()}"
+    if not depends_t:
+        return f"{xs}, all t"
+    return f"{xs} x t in [{t_range[0]}, {t_range[1]}]"
+
+
+# --------------------------------------------------------------------------------------------
+# numeric Jacobian and sampling
+# --------------------------------------------------------------------------------------------
+
+
+def jacobian_function(J: sp.Matrix, states: Sequence[sp.Symbol], t: sp.Symbol | None) -> JacobianFn:
+    """Vectorised numpy Jacobian ``J_num(t, X) -> (N, n, n)`` by ``sympy.lambdify``.
+
+    ``t`` is an array of shape ``(N,)`` (ignored if ``J`` has no time symbol), ``X`` has shape
+    ``(N, n)``. Raises :class:`UnsupportedExpression` when ``J`` contains undefined functions
+    (pass a ``J_num`` built from the system instead).
+    """
+    opaque = opaque_functions(J)
+    if opaque:
+        names = sorted({str(f.func) for f in opaque})
+        raise UnsupportedExpression(
+            f"J contains undefined functions {names}; pass J_num(t, X) built from the system"
+        )
+    n = J.shape[0]
+    tt = t if t is not None else sp.Dummy("t")
+    fns = [sp.lambdify((tt, *states), e, modules="numpy") for e in J]
+
+    def J_num(tv: np.ndarray, X: np.ndarray) -> np.ndarray:
+        X = np.asarray(X, dtype=float)
+        N = X.shape[0]
+        tv = np.broadcast_to(np.asarray(tv, dtype=float), (N,))
+        cols = [X[:, i] for i in range(n)]
+        out = np.empty((N, n * n))
+        for k, f in enumerate(fns):
+            out[:, k] = np.broadcast_to(np.asarray(f(tv, *cols), dtype=float), (N,))
+        return out.reshape(N, n, n)
+
+    return J_num
+
+
+def _grid(full: np.ndarray, n_grid: int) -> np.ndarray:
+    d = full.shape[0]
+    live = [i for i in range(d) if full[i, 1] > full[i, 0]]
+    k = max(3, int(round(n_grid ** (1.0 / max(len(live), 1))))) if live else 1
+    if k % 2 == 0:
+        k += 1
+    axes = [
+        np.linspace(full[i, 0], full[i, 1], k) if i in live else np.array([full[i, 0]])
+        for i in range(d)
+    ]
+    mesh = np.meshgrid(*axes, indexing="ij")
+    return np.stack([m.ravel() for m in mesh], axis=-1)
+
+
+def sampled_max_mu2(
+    J_num: JacobianFn,
+    full_box: np.ndarray,
+    n_states: int,
+    options: SamplingOptions = SamplingOptions(),
+) -> tuple[float, np.ndarray]:
+    """Sampled estimate of ``max mu_2(J)`` over a box (ESTIMATE, not a bound).
+
+    Parameters
+    ----------
+    J_num
+        ``J_num(t, X) -> (N, n, n)``.
+    full_box
+        ``(n [+1], 2)``: the state box, with the time range as a last row when ``J`` depends on t.
+    n_states
+        ``n``; a row beyond it is time.
+    options
+        Grid size, random points, local searches and the seed.
+
+    Returns
+    -------
+    (value, argmax)
+        The largest ``mu_2`` found and the point ``(x..., [t])`` where it was found.
+    """
+    full_box = np.asarray(full_box, dtype=float)
+    d = full_box.shape[0]
+    rng = np.random.default_rng(options.seed)
+
+    def mu_at(P: np.ndarray) -> np.ndarray:
+        P = np.atleast_2d(P)
+        tv = P[:, n_states] if d > n_states else np.zeros(P.shape[0])
+        vals = mu_2(J_num(tv, P[:, :n_states]))
+        return np.where(np.isfinite(vals), vals, np.inf)
+
+    pts = [_grid(full_box, options.n_grid)]
+    if options.n_random:
+        pts.append(full_box[:, 0] + rng.random((options.n_random, d)) * np.ptp(full_box, axis=1))
+    P = np.concatenate(pts)
+    vals = mu_at(P)
+    order = np.argsort(-vals)
+    best_i = int(order[0])
+    best, arg = float(vals[best_i]), P[best_i].copy()
+    bounds = [(float(a), float(b)) for a, b in full_box]
+    for i in order[: options.n_local]:
+        res = minimize(
+            lambda z: -float(mu_at(z)[0]),
+            P[i],
+            method="L-BFGS-B",
+            bounds=bounds,
+            options={"maxiter": 200},
+        )
+        z = np.clip(res.x, full_box[:, 0], full_box[:, 1])
+        v = float(mu_at(z)[0])
+        if v > best:
+            best, arg = v, z
+    return best, arg
+
+
+# --------------------------------------------------------------------------------------------
+# branch and bound
+# --------------------------------------------------------------------------------------------
+
+
+def _bnb(
+    menc: MatrixEnclosure,
+    full_box: np.ndarray,
+    point_mu: Callable[[np.ndarray], float],
+    active: np.ndarray,
+    lb0: float,
+    arg0: np.ndarray,
+    tol: float,
+    max_boxes: int,
+    max_time_s: float,
+) -> tuple[float, float, np.ndarray, int]:
+    """Branch and bound on ``max mu_2``; returns ``(upper, lower, argmax, n_boxes)``."""
+    scale = np.ptp(full_box, axis=1)
+    scale = np.where(scale > 0, scale, 1.0)
+    scale = np.where(active, scale, np.inf)  # never split a variable J does not depend on
+
+    def upper(b: np.ndarray) -> float:
+        lo, hi = menc(b)
+        return mu2_interval_upper(lo, hi)
+
+    lb, arg = lb0, arg0
+    counter = 0
+    heap = [(-upper(full_box), counter, full_box)]
+    n_boxes = 1
+    deadline = time.perf_counter() + max_time_s
+    while True:
+        ub = -heap[0][0]
+        if ub - lb <= tol or n_boxes >= max_boxes or time.perf_counter() > deadline:
+            break
+        _, _, b = heapq.heappop(heap)
+        widths = np.ptp(b, axis=1) / scale
+        k = int(np.argmax(widths))
+        if widths[k] == 0.0:  # a point box: cannot split further
+            heapq.heappush(heap, (-ub, counter, b))
+            break
+        mid = 0.5 * (b[k, 0] + b[k, 1])
+        for half in ((b[k, 0], mid), (mid, b[k, 1])):
+            c = b.copy()
+            c[k] = half
+            counter += 1
+            n_boxes += 1
+            heapq.heappush(heap, (-upper(c), counter, c))
+            centre = 0.5 * (c[:, 0] + c[:, 1])
+            v = point_mu(centre)
+            if v > lb:
+                lb, arg = v, centre
+    return -heap[0][0], lb, arg, n_boxes
+
+
+def contraction_rate(
+    J: sp.Matrix,
+    states: Sequence[sp.Symbol],
+    box: np.ndarray | None = None,
+    t: sp.Symbol | None = None,
+    t_range: tuple[float, float] | None = None,
+    *,
+    J_num: JacobianFn | None = None,
+    enclose: EncloseCallback | None = None,
+    method: str = "auto",
+    tol: float = DEFAULT_TOL,
+    max_boxes: int = DEFAULT_MAX_BOXES,
+    max_time_s: float = DEFAULT_MAX_TIME_S,
+    sampling: SamplingOptions = SamplingOptions(),
+) -> ContractionResult:
+    """Contraction rate ``lambda`` with ``mu_2(J(t, x)) <= -lambda`` (DRIP Assumption 2).
+
+    Parameters
+    ----------
+    J
+        Closed-loop Jacobian ``d/dx [f(t, x) + g(t) pi(x)]``, a square sympy Matrix.
+    states
+        State symbols ``x1..xn`` (the order of the rows of ``box``).
+    box
+        ``(n, 2)`` support box of the states; required when ``J`` depends on the states.
+    t, t_range
+        Time symbol and range; ``t_range`` is required when ``J`` depends on ``t``.
+    J_num
+        Optional vectorised numeric Jacobian ``J_num(t, X) -> (N, n, n)`` for sampling; built by
+        :func:`jacobian_function` when absent.
+    enclose
+        Interval callback for undefined functions (see :mod:`drip_cert.analysis.interval`).
+    method
+        ``'auto'`` (exact if ``J`` is constant, else interval branch and bound, falling back to
+        sampling when an expression has no sound enclosure), ``'exact-linear'``,
+        ``'interval-bnb'`` or ``'sampled'``.
+    tol
+        Absolute target gap between the sound upper bound and the sampled maximum of ``mu_2``.
+    max_boxes, max_time_s
+        Budgets of branch and bound (sub-boxes, wall time); when one is spent the bound is still
+        sound, only looser, and the note says so.
+    sampling
+        :class:`SamplingOptions` of the sampled estimate (its seed makes the result reproducible).
+
+    Returns
+    -------
+    ContractionResult
+    """
+    t0 = time.perf_counter()
+    n, states, box, t_range = _check_inputs(J, states, box, t, t_range)
+    if method not in _METHODS:
+        raise SpecError(f"unknown method {method!r}; use one of {_METHODS}", field="method")
+    if tol <= 0:
+        raise SpecError(f"tol must be > 0, got {tol}", field="tol")
+    depends_x = bool(J.free_symbols & set(states)) or bool(opaque_functions(J))
+    depends_t = t is not None and J.has(t)
+
+    if not depends_x and not depends_t:
+        try:
+            A = np.array(J.evalf(), dtype=float)
+        except TypeError as exc:
+            raise SpecError(f"J is constant but not real-valued: {J}", field="J") from exc
+        m = float(mu_2(A))
+        return ContractionResult(
+            rate=-m,
+            how=How.EXACT,
+            method="exact-linear",
+            region="all x, all t",
+            max_mu_upper=m,
+            max_mu_sampled=m,
+            witness=None,
+            tolerance=0.0,
+            n_boxes=0,
+            time_s=time.perf_counter() - t0,
+            note="constant Jacobian (linear or affine closed loop): mu_2 = lambda_max(sym J)",
+        )
+    if method == "exact-linear":
+        raise SpecError(
+            "method 'exact-linear' needs a Jacobian constant in x and t; use 'auto'", field="method"
+        )
+    if depends_t and t_range is None:
+        raise SpecError(
+            "J depends on the time symbol; give t_range=(t0, T) (the paper asks for all t >= 0, "
+            "a finite range is weaker)",
+            field="t_range",
+        )
+    if depends_x and box is None:
+        raise SpecError(
+            "J depends on the states; give a support box of shape (n, 2) (the paper asks for all "
+            "x: a box is weaker and the report says so)",
+            field="box",
+        )
+    # the box of the search: states (a dummy 0-width box when J is free of x), then time
+    sbox = box if box is not None else np.zeros((n, 2))
+    full = np.vstack([sbox, [t_range]]) if depends_t else sbox.copy()
+    variables = [*states, t] if depends_t else list(states)
+    region = _region(box if depends_x else None, t_range, depends_t)
+    if J_num is None:
+        try:
+            J_num = jacobian_function(J, states, t)
+        except UnsupportedExpression:
+            J_num = None
+
+    menc: MatrixEnclosure | None = None
+    reason = ""
+    if method in ("auto", "interval-bnb"):
+        try:
+            menc = MatrixEnclosure(J, variables, enclose)
+            menc(full)  # domain errors and callback refusals surface here
+        except UnsupportedExpression as exc:
+            if method == "interval-bnb":
+                raise
+            menc, reason = None, str(exc)
+
+    if J_num is not None:
+        lb, arg = sampled_max_mu2(J_num, full, n, sampling)
+    elif menc is not None:
+        lb, arg = -math.inf, 0.5 * (full[:, 0] + full[:, 1])
+    else:
+        raise UnsupportedExpression(
+            f"no sound enclosure ({reason}) and no J_num to sample: "
+            "pass J_num or an enclose callback"
+        )
+
+    def point_mu(z: np.ndarray) -> float:
+        if J_num is not None:
+            tv = np.array([z[n]]) if depends_t else np.zeros(1)
+            return float(mu_2(J_num(tv, z[None, :n]))[0])
+        lo, hi = menc(np.stack([z, z], axis=1))
+        return float(mu_2(0.5 * (lo + hi)))
+
+    if menc is None:
+        return ContractionResult(
+            rate=-lb,
+            how=How.ESTIMATE,
+            method="sampled",
+            region=region,
+            max_mu_upper=math.nan,
+            max_mu_sampled=lb,
+            witness=tuple(float(v) for v in arg),
+            tolerance=tol,
+            n_boxes=0,
+            time_s=time.perf_counter() - t0,
+            note=(
+                "sampled estimate (grid + random + local search), NOT a bound"
+                + (f"; no sound enclosure: {reason}" if reason else "")
+            ),
+        )
+    if not math.isfinite(lb):
+        lb = point_mu(arg)
+    active = np.array([J.has(v) for v in variables])
+    ub, lb, arg, n_boxes = _bnb(menc, full, point_mu, active, lb, arg, tol, max_boxes, max_time_s)
+    if lb > ub + 1e-9 * (1.0 + abs(ub)):
+        raise SolverError(
+            f"a sampled mu_2 = {lb:.17g} at {arg.tolist()} exceeds the sound bound {ub:.17g}: "
+            "J_num does not evaluate the same Jacobian as J (or an enclose callback is unsound)"
+        )
+    gap = ub - lb
+    note = (
+        f"sound bound {ub:.6g} vs sampled {lb:.6g}, gap {gap:.3g}"
+        + (" <= tol" if gap <= tol else f" > tol {tol:g}: budget spent ({n_boxes} boxes)")
+        + ("" if depends_x else "; J is independent of x, so the rate holds for all x")
+    )
+    if depends_x:
+        note += "; holds only on the box (the paper asks for all x)"
+    return ContractionResult(
+        rate=-ub,
+        how=How.SOUND,
+        method="interval-bnb",
+        region=region,
+        max_mu_upper=ub,
+        max_mu_sampled=lb,
+        witness=tuple(float(v) for v in arg),
+        tolerance=tol,
+        n_boxes=n_boxes,
+        time_s=time.perf_counter() - t0,
+        note=note,
+    )

@@ -1,0 +1,130 @@
+"""Matrix measures: closed forms, the limit definition, and the rigorous eigenvalue bounds."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import scipy.linalg as sl
+
+from drip_cert.analysis.lognorm import (
+    lambda_max_upper,
+    mu2_interval_upper,
+    mu_1,
+    mu_2,
+    mu_2_weighted,
+    mu_inf,
+    perron_upper,
+    spectral_abscissa,
+)
+from drip_cert.errors import SpecError
+
+#: closed forms vs LAPACK eigenvalues of O(1) matrices: a few hundred ulps
+CLOSED_FORM_TOL = 1e-12
+#: step of the one-sided difference in the definition mu(A) = lim (||I + hA|| - 1)/h
+H_DEF = 1e-7
+#: the difference quotient has error O(h ||A||^2) ~ 1e-6 for ||A|| ~ 3, plus rounding eps/h ~ 2e-9
+DEF_TOL = 2e-5
+#: rigorous bounds may exceed the float eigenvalue by O(n eps ||S||) only
+RIGOROUS_EXCESS = 1e-11
+
+
+def _batch(seed: int, shape=(50, 3, 3)) -> np.ndarray:
+    return np.random.default_rng(seed).normal(size=shape)
+
+
+def test_mu2_2x2_closed_form():
+    A = _batch(0, (200, 2, 2))
+    a, b, c, d = A[:, 0, 0], A[:, 0, 1], A[:, 1, 0], A[:, 1, 1]
+    expected = 0.5 * (a + d) + np.sqrt((0.5 * (a - d)) ** 2 + (0.5 * (b + c)) ** 2)
+    np.testing.assert_allclose(mu_2(A), expected, atol=CLOSED_FORM_TOL)
+
+
+def test_mu2_of_symmetric_is_lambda_max():
+    A = _batch(1)
+    S = A + np.swapaxes(A, 1, 2)
+    expected = np.array([sl.eigh(s, eigvals_only=True)[-1] for s in S])
+    np.testing.assert_allclose(mu_2(S), expected, atol=CLOSED_FORM_TOL)
+
+
+def test_mu1_muinf_hand_computed():
+    A = np.array([[-3.0, 1.0, 2.0], [0.5, -4.0, 1.0], [-1.0, 2.0, -5.0]])
+    # columns: -3+0.5+1, -4+1+2, -5+2+1 ; rows: -3+1+2, 0.5-4+1, -1+2-5
+    assert mu_1(A) == pytest.approx(-1.0, abs=CLOSED_FORM_TOL)
+    assert mu_inf(A) == pytest.approx(0.0, abs=CLOSED_FORM_TOL)
+
+
+@pytest.mark.parametrize(("fn", "ord_"), [(mu_1, 1), (mu_2, 2), (mu_inf, np.inf)])
+def test_log_norms_match_the_limit_definition(fn, ord_):
+    A = _batch(2, (20, 3, 3))
+    eye = np.eye(3)
+    by_def = np.array([(np.linalg.norm(eye + H_DEF * a, ord_) - 1.0) / H_DEF for a in A])
+    np.testing.assert_allclose(fn(A), by_def, atol=DEF_TOL)
+
+
+@pytest.mark.parametrize("fn", [mu_1, mu_2, mu_inf])
+def test_log_norm_properties(fn):
+    A, B = _batch(3), _batch(4)
+    # lower bound by the spectral abscissa, subadditivity, translation by c I
+    assert np.all(fn(A) >= spectral_abscissa(A) - CLOSED_FORM_TOL)
+    assert np.all(fn(A + B) <= fn(A) + fn(B) + CLOSED_FORM_TOL)
+    np.testing.assert_allclose(fn(A + 2.5 * np.eye(3)), fn(A) + 2.5, atol=CLOSED_FORM_TOL)
+
+
+def test_weighted_mu2_is_mu2_after_change_of_coordinates():
+    rng = np.random.default_rng(5)
+    A = rng.normal(size=(30, 3, 3))
+    M = rng.normal(size=(3, 3))
+    P = M @ M.T + 0.5 * np.eye(3)
+    R = sl.sqrtm(P).real
+    changed = mu_2(R @ A @ np.linalg.inv(R))
+    np.testing.assert_allclose(mu_2_weighted(A, P), changed, atol=1e-10)
+    gen = [sl.eigh(0.5 * (a.T @ P + P @ a), P, eigvals_only=True)[-1] for a in A]
+    np.testing.assert_allclose(mu_2_weighted(A, P), gen, atol=1e-10)
+    np.testing.assert_allclose(mu_2_weighted(A, np.eye(3)), mu_2(A), atol=CLOSED_FORM_TOL)
+
+
+def test_weighted_rejects_indefinite_P():
+    with pytest.raises(SpecError):
+        mu_2_weighted(np.eye(2), np.diag([1.0, -1.0]))
+    with pytest.raises(SpecError):
+        mu_2(np.ones((2, 3)))
+
+
+def test_lambda_max_upper_is_rigorous_and_tight():
+    for S in _batch(6, (40, 4, 4)):
+        S = S + S.T
+        exact = np.linalg.eigvalsh(S)[-1]
+        ub = lambda_max_upper(S)
+        assert exact <= ub <= exact + RIGOROUS_EXCESS * (1 + np.abs(S).max())
+
+
+def test_lambda_max_upper_of_an_exact_diagonal():
+    # eigenvalues known exactly: the bound must not be below them
+    S = np.diag([-3.0, 0.25, 1e-3])
+    assert 0.25 <= lambda_max_upper(S) <= 0.25 + RIGOROUS_EXCESS
+    assert -3.0 >= -lambda_max_upper(-S) >= -3.0 - RIGOROUS_EXCESS  # lambda_min from below
+
+
+def test_perron_upper_bounds_spectral_radius():
+    N = np.abs(_batch(7, (30, 4, 4)))
+    for n in N:
+        rho = np.max(np.abs(np.linalg.eigvals(n)))
+        ub = perron_upper(n)
+        assert rho <= ub
+        # Collatz-Wielandt with a near-Perron vector of the symmetric part: not tight for
+        # non-symmetric N, but never worse than the max row sum
+        assert ub <= np.abs(n).sum(axis=1).max() * (1 + 1e-12)
+
+
+def test_interval_mu2_bound_contains_sampled_members():
+    rng = np.random.default_rng(8)
+    for _ in range(20):
+        C = rng.normal(size=(3, 3))
+        R = 0.2 * rng.random((3, 3))
+        ub = mu2_interval_upper(C - R, C + R)
+        members = C + R * rng.uniform(-1, 1, size=(500, 3, 3))
+        assert mu_2(members).max() <= ub
+        # and the Rohn bound is within rho(sym R) of the centre's mu_2
+        assert ub <= mu_2(C) + np.max(np.abs(np.linalg.eigvalsh(R + R.T))) + 1e-9
+    A = rng.normal(size=(3, 3))
+    assert mu_2(A) <= mu2_interval_upper(A, A) <= mu_2(A) + RIGOROUS_EXCESS * 10
