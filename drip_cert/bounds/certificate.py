@@ -30,7 +30,7 @@ from drip_cert.provenance import Check, How, Quantity, json_float
 from drip_cert.system.spec import Spec
 from drip_cert.system.system import System
 
-CONTRACTION_KEYS = {"method", "region", "tol", "max_boxes", "metric"}
+CONTRACTION_KEYS = {"method", "region", "tol", "max_boxes", "metric", "max_time"}
 
 
 @dataclass(frozen=True)
@@ -46,6 +46,7 @@ class ContractionOptions:
     tol: float = 1e-3
     max_boxes: int = 4000
     metric: bool = True
+    max_time: float = 20.0  #: seconds of interval branch and bound per closed loop
 
     @staticmethod
     def from_table(table: Mapping[str, Any], n: int) -> ContractionOptions:
@@ -72,7 +73,11 @@ class ContractionOptions:
         metric = table.get("metric", True)
         if not isinstance(metric, bool):
             raise SpecError(f"must be true or false, got {metric!r}", field="contraction.metric")
-        return ContractionOptions(method, region, float(tol), int(mb), metric)
+        mt = table.get("max_time", 20.0)
+        if isinstance(mt, bool) or not isinstance(mt, int | float) or not mt > 0:
+            raise SpecError(f"must be a number of seconds > 0, got {mt!r}",
+                            field="contraction.max_time")
+        return ContractionOptions(method, region, float(tol), int(mb), metric, float(mt))
 
 
 @dataclass(frozen=True)
@@ -118,7 +123,7 @@ def analyse_contraction(s: System, which: str, opts: ContractionOptions) -> Cont
     enclose = block_enclose_callback(s.blocks) if s.blocks else None
     res = contraction_rate(J, s.states, box, s.t if depends_t else None, t_range, J_num=J_num,
                            enclose=enclose, method=opts.method, tol=opts.tol,
-                           max_boxes=opts.max_boxes)
+                           max_boxes=opts.max_boxes, max_time_s=opts.max_time)
     metric, err = None, ""
     if opts.metric:
         try:
@@ -332,7 +337,17 @@ def certify(spec: Spec, *, tasil: Any | None = None) -> Certificate:
         from drip_cert.bounds.l1_system import l1_section
 
         src = cl if cl is not None else ce
-        l1 = l1_section(s, spec.table("l1drac"), given, src.euclidean.to_quantity(),
+        lam_q = src.euclidean.to_quantity()
+        est = -src.euclidean.max_mu_sampled
+        if lam_q.value <= 0 < est:
+            # the sound route did not establish contraction but sampling suggests it: design
+            # with the estimate, labelled so, and the L1DRAC-A2 check above stays failed
+            lam_q = Quantity("lambda", est, How.ESTIMATE, lam_q.source,
+                             "sampled estimate of the rate (the sound bound did not establish "
+                             "contraction): the L1-DRAC design below is conditional on it")
+            notes.append("the L1-DRAC design uses a sampled estimate of the contraction rate of "
+                         f"the {src.policy} closed loop ({est:.6g}); it is not certified")
+        l1 = l1_section(s, spec.table("l1drac"), given, lam_q,
                         src.euclidean.region.startswith("all"), src.policy,
                         {q.name: q for q in ic.quantities()}, uc.values)
         checks.append(Check(
