@@ -146,7 +146,7 @@ def l1_section(s: System, table: Mapping[str, Any], given: Mapping[str, Any],
         lip_f = math.isfinite(q["L_f"].value)
     if not isinstance(lip_f, bool):
         raise SpecError(f"must be true or false, got {lip_f!r}", field="l1drac.lip_f")
-    bad = [k for k, v in q.items() if not math.isfinite(v.value)]
+    bad = [k for k, v in q.items() if not math.isfinite(v.value) and not (k == "L_f" and not lip_f)]
     if bad:
         return L1Section(q, None, "constants without a finite value: " + ", ".join(
             f"{k} ({q[k].note})" for k in bad) + "; give them in [constants]")
