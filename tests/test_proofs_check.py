@@ -1,0 +1,87 @@
+"""The proof checks: the quick suite passes (or reports documented errata), and checks can fail."""
+
+from __future__ import annotations
+
+import json
+import re
+from pathlib import Path
+
+import pytest
+
+from proofs_check import Verdict, run_checks
+from proofs_check.__main__ import main
+from proofs_check._core import Context, make_rng
+
+ROOT = Path(__file__).resolve().parents[1]
+
+ERRATA = ROOT / "proofs_check" / "ERRATA.md"
+
+
+@pytest.fixture(scope="module")
+def quick_results():
+    return run_checks(quick=True, seed=0)
+
+
+def _ctx(name: str) -> Context:
+    return Context(rng=make_rng(0, name), quick=True, seed=0)
+
+
+def test_quick_suite_passes_or_documents_errata(quick_results):
+    assert len(quick_results) >= 25
+    failed = [(r.name, r.detail) for r in quick_results if r.verdict is Verdict.FAIL]
+    assert not failed, failed
+    headings = set(re.findall(r"^## (E\d+):", ERRATA.read_text(), flags=re.M))
+    for r in quick_results:
+        if r.verdict is Verdict.ERRATUM:
+            assert r.erratum in headings, (r.name, r.erratum)
+
+
+def test_expected_errata_are_found(quick_results):
+    by_name = {r.name: r for r in quick_results}
+    for name in ("iss.perturbed_ode_statement", "tasil.rho_rate_delta", "l1drac.Ts_rate",
+                 "example.uncertainty_constants", "example.expert_contraction"):
+        assert by_name[name].verdict is Verdict.ERRATUM, name
+    for name in ("iss.young_step", "iss.bound_random_systems", "iss.tight_never_looser",
+                 "decomposition.tig", "l1drac.markov_step", "l1drac.propA1_monotone"):
+        assert by_name[name].verdict is Verdict.PASS, name
+
+
+def test_wrong_young_constant_fails():
+    from proofs_check.delta_iss import check_young
+
+    assert check_young(_ctx("iss.young_step")).verdict is Verdict.PASS
+    assert check_young(_ctx("iss.young_step"), young_factor=0.9).verdict is Verdict.FAIL
+
+
+def test_wrong_markov_exponent_fails():
+    from proofs_check.l1drac_probability import check_markov
+
+    assert check_markov(_ctx("l1drac.markov_step"), p_factor=0.5).verdict is Verdict.FAIL
+
+
+def test_overclaimed_contraction_rate_fails():
+    from proofs_check.delta_iss import check_bound_random
+
+    res = check_bound_random(_ctx("iss.bound_random_systems"), rate_factor=1.3)
+    assert res.verdict is Verdict.FAIL and res.residual > 0
+
+
+def test_wrong_gap_constant_fails():
+    from proofs_check.tasil_gap import check_gap_adversarial
+
+    res = check_gap_adversarial(_ctx("tasil.gap_lemma_adversarial"), sharp_factor=0.95)
+    assert res.verdict is Verdict.FAIL
+
+
+def test_cli_json_and_filter(capsys):
+    assert main(["--quick", "--json", "--only", "iss.theta"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert [o["name"] for o in out] == ["iss.theta_range_and_optimum"]
+    assert set(out[0]) >= {"name", "label", "verdict", "residual", "detail"}
+    assert main(["--quick", "--only", "no-such-check"]) == 2
+
+
+def test_same_seed_same_numbers():
+    a = run_checks(quick=True, seed=3, only="decomposition")
+    b = run_checks(quick=True, seed=3, only="decomposition")
+    assert [r.residual for r in a] == [r.residual for r in b]
