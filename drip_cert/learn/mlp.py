@@ -261,3 +261,28 @@ def load_mlp(
             field=field,
         )
     return mlp
+
+
+def mlp_from_params(params, activation: str = "tanh", output_activation: str | None = None) -> MLP:
+    """The :class:`MLP` value object of a parameter pytree ``[(W0, b0), (W1, b1), ...]``.
+
+    ``params`` may hold numpy or jax arrays (e.g. the result of training); they are copied to
+    read-only float64 numpy arrays, so the returned MLP is saved by :func:`save_mlp` in the
+    standard ``.npz``/``.json`` format. Inverse of :func:`jax_params`.
+    """
+    try:
+        ws = tuple(np.asarray(w, dtype=np.float64) for w, _ in params)
+        bs = tuple(np.asarray(b, dtype=np.float64) for _, b in params)
+    except (TypeError, ValueError) as exc:
+        raise SpecError(
+            f"MLP parameters must be a sequence of (W, b) pairs of arrays: {exc}"
+        ) from None
+    return MLP(ws, bs, activation, output_activation)
+
+
+def jax_params(mlp: MLP) -> list:
+    """The parameter pytree ``[(W0, b0), ...]`` of ``mlp`` as jax arrays (inverse of
+    :func:`mlp_from_params`), ready for :func:`apply_params` with ``xp=jax.numpy``."""
+    from drip_cert._jax import jnp
+
+    return [(jnp.asarray(w), jnp.asarray(b)) for w, b in mlp.params()]

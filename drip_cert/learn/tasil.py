@@ -1,0 +1,449 @@
+"""Training imitation policies by TaSIL or behaviour cloning (BC), and measuring the gap.
+
+:func:`train_policy` fits an MLP policy ``pi_hat`` with smooth activations to expert
+demonstrations (:class:`~drip_cert.learn.data.Demonstrations`) by minimising the TaSIL loss of
+DRIP eq. (LossTaSIL) (value + Jacobian matching, order 1, optionally + Hessian, order 2) or the BC
+loss (value matching only); see :mod:`drip_cert.learn.losses`. The optimiser is Adam (optax) on
+seeded mini-batches, with jit-compiled steps run ``eval_every`` at a time under ``lax.scan``.
+A seeded share of the trajectories is held out; the held-out loss is evaluated every
+``eval_every`` steps and training stops when it has not improved for ``patience`` steps; the best
+parameters are restored. Same seed and data -> bit-identical weights.
+
+:func:`evaluate_gap` measures the imitation gap the TaSIL code reports: expert and learner
+closed loops from the same initial states, the same integrator, and per trajectory
+``max_t ||x_hat_t - x*_t||_2`` over the sample grid.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import asdict, dataclass
+from functools import partial
+
+import numpy as np
+import optax
+from tqdm.auto import tqdm
+
+from drip_cert._jax import jax, jnp
+from drip_cert.errors import SpecError
+from drip_cert.learn.data import DEFAULT_SUBSTEPS, Demonstrations, simulate_closed_loop
+from drip_cert.learn.losses import LossSpec, Targets, expert_targets, imitation_loss
+from drip_cert.learn.mlp import ACTIVATIONS, MLP, apply_params, init_mlp, mlp_from_params
+
+METHODS = ("tasil", "bc")
+SCHEDULES = ("constant", "cosine")
+
+
+@dataclass(frozen=True)
+class TrainSettings:
+    """Every setting of one training run (recorded in :class:`TrainResult`).
+
+    ``order`` is the effective Taylor order: 0 for BC. ``batch`` counts states for the
+    ``"mean"`` reduction and trajectories for ``"max"``.
+    """
+
+    method: str = "tasil"
+    order: int = 1
+    hidden: tuple[int, ...] = (64, 64)
+    activation: str = "tanh"
+    output_activation: str | None = None
+    seed: int = 0
+    steps: int = 5000
+    lr: float = 3e-3
+    schedule: str = "cosine"
+    batch: int = 128
+    val_fraction: float = 0.2
+    patience: int = 1000
+    eval_every: int = 50
+    lambda_j: float = 1.0
+    lambda_h: float = 10.0
+    reduction: str = "mean"
+
+    def __post_init__(self) -> None:
+        if self.method not in METHODS:
+            raise SpecError(f"method must be one of {METHODS}, got {self.method!r}", field="method")
+        if self.activation not in ("tanh", "gelu"):
+            raise SpecError(
+                f"activation must be 'tanh' or 'gelu' (smooth, as the TaSIL certificate needs a "
+                f"Lipschitz Jacobian), got {self.activation!r}",
+                field="activation",
+            )
+        if self.output_activation is not None and self.output_activation not in ACTIVATIONS:
+            raise SpecError(
+                f"output_activation must be None or one of {ACTIVATIONS}, "
+                f"got {self.output_activation!r}",
+                field="output_activation",
+            )
+        hidden = tuple(self.hidden)
+        if any(int(h) != h or h < 1 for h in hidden):
+            raise SpecError(f"hidden sizes must be positive integers, got {hidden}", field="hidden")
+        object.__setattr__(self, "hidden", tuple(int(h) for h in hidden))
+        for name in ("steps", "batch", "patience", "eval_every"):
+            value = getattr(self, name)
+            if int(value) != value or value < 1:
+                raise SpecError(f"{name} must be a positive integer, got {value!r}", field=name)
+        if not (np.isfinite(self.lr) and self.lr > 0):
+            raise SpecError(f"lr must be a positive number, got {self.lr!r}", field="lr")
+        if self.schedule not in SCHEDULES:
+            raise SpecError(
+                f"schedule must be one of {SCHEDULES}, got {self.schedule!r}", field="schedule"
+            )
+        if not (0.0 <= self.val_fraction < 1.0):
+            raise SpecError(
+                f"val_fraction must be in [0, 1), got {self.val_fraction!r}", field="val_fraction"
+            )
+        self.loss_spec()  # validates order, lambdas and reduction
+
+    def loss_spec(self) -> LossSpec:
+        """The :class:`~drip_cert.learn.losses.LossSpec` these settings minimise."""
+        return LossSpec(
+            order=0 if self.method == "bc" else self.order,
+            lambda_j=self.lambda_j,
+            lambda_h=self.lambda_h,
+            reduction=self.reduction,
+        )
+
+
+@dataclass(frozen=True)
+class TrainHistory:
+    """Losses at the evaluation steps: full training-set and held-out loss after ``steps[i]``
+    optimiser steps (``steps[0] = 0`` is the initial network)."""
+
+    steps: tuple[int, ...]
+    train_loss: tuple[float, ...]
+    val_loss: tuple[float, ...]
+
+
+@dataclass(frozen=True)
+class TrainResult:
+    """Outcome of :func:`train_policy`.
+
+    Attributes
+    ----------
+    mlp
+        The restored best policy (save it with ``mlp.save(path)``).
+    method, order
+        ``"tasil"`` / ``"bc"`` and the effective Taylor order (0 for BC).
+    history
+        :class:`TrainHistory`.
+    best_step, best_val_loss
+        Step of the restored parameters and their held-out loss (training loss when
+        ``val_fraction = 0``).
+    stop_reason
+        ``"steps"`` (the budget ran out), ``"patience"`` (early stopping) or
+        ``"non-finite loss"`` (the held-out loss became NaN/inf; the best finite parameters are
+        kept).
+    wall_time_s
+        Wall-clock seconds of the whole call, jit compilation included.
+    settings
+        :class:`TrainSettings`.
+    train_index, val_index
+        Trajectory indices of the two splits.
+    """
+
+    mlp: MLP
+    method: str
+    order: int
+    history: TrainHistory
+    best_step: int
+    best_val_loss: float
+    stop_reason: str
+    wall_time_s: float
+    settings: TrainSettings
+    train_index: tuple[int, ...]
+    val_index: tuple[int, ...]
+
+    def policy(self) -> Callable:
+        """The learned policy ``x -> u`` as a jax-traceable function."""
+        return self.mlp.apply_jax
+
+
+def train_policy(
+    demos: Demonstrations,
+    expert: Callable,
+    method: str = "tasil",
+    order: int = 1,
+    hidden: Sequence[int] = (64, 64),
+    activation: str = "tanh",
+    seed: int = 0,
+    steps: int = 5000,
+    lr: float = 3e-3,
+    batch: int = 128,
+    val_fraction: float = 0.2,
+    patience: int = 1000,
+    progress: bool = True,
+    *,
+    expert_jac: Callable | None = None,
+    eval_every: int = 50,
+    schedule: str = "cosine",
+    lambda_j: float = 1.0,
+    lambda_h: float = 10.0,
+    reduction: str = "mean",
+    output_activation: str | None = None,
+) -> TrainResult:
+    """Train an MLP policy on expert demonstrations by TaSIL (DRIP eq. (LossTaSIL)) or BC.
+
+    Parameters
+    ----------
+    demos
+        Expert demonstrations; the loss uses the samples ``t in partition \\ {T}`` as in
+        eq. (LossTaSIL) (the last sample of each trajectory is not used).
+    expert
+        ``expert(x) -> u`` (jax-traceable), for the expert derivatives.
+    method
+        ``"tasil"`` or ``"bc"`` (behaviour cloning, value matching only; ``order`` is ignored).
+    order
+        TaSIL order: 1 (value + Jacobian, DRIP's choice p = 1) or 2 (+ Hessian).
+    hidden, activation
+        Hidden layer widths and the smooth activation (``"tanh"`` or ``"gelu"``).
+    seed
+        Seed of the initial weights, the train/validation split and the mini-batches.
+    steps, lr, batch
+        Adam steps, learning rate (peak of the cosine decay when ``schedule="cosine"``), and
+        mini-batch size (states for ``reduction="mean"``, trajectories for ``"max"``).
+    val_fraction
+        Share of the trajectories held out for early stopping (at least one when > 0 and there
+        are two or more trajectories; 0 selects on the training loss).
+    patience
+        Stop when the held-out loss has not improved for this many steps.
+    progress
+        Show a tqdm bar (also off when stderr is not a terminal).
+    expert_jac
+        Optional analytic Jacobian ``x -> (m, n)`` of the expert (else ``jax.jacrev``).
+    eval_every
+        Steps between two evaluations of the training and held-out losses.
+    schedule
+        ``"cosine"`` (decay to 0 over ``steps``) or ``"constant"`` learning rate.
+    lambda_j, lambda_h, reduction
+        Loss weights and reduction, see :class:`~drip_cert.learn.losses.LossSpec`.
+    output_activation
+        Optional activation of the output layer (``None``: affine output).
+
+    Returns
+    -------
+    TrainResult
+    """
+    t_start = time.perf_counter()
+    settings = TrainSettings(
+        method=method,
+        order=0 if method == "bc" else order,
+        hidden=tuple(hidden),
+        activation=activation,
+        output_activation=output_activation,
+        seed=seed,
+        steps=steps,
+        lr=lr,
+        schedule=schedule,
+        batch=batch,
+        val_fraction=val_fraction,
+        patience=patience,
+        eval_every=eval_every,
+        lambda_j=lambda_j,
+        lambda_h=lambda_h,
+        reduction=reduction,
+    )
+    if not isinstance(demos, Demonstrations):
+        raise SpecError(
+            f"demos must be a Demonstrations object, got {type(demos).__name__}; build one with "
+            "generate_demonstrations(...) or load_demonstrations(path)",
+            field="demos",
+        )
+    spec = settings.loss_spec()
+    rng = np.random.default_rng(seed)
+    train_idx, val_idx = _split(demos.n_traj, settings.val_fraction, rng)
+    mlp0 = init_mlp(
+        (demos.state_dim, *settings.hidden, demos.input_dim),
+        rng,
+        settings.activation,
+        settings.output_activation,
+    )
+    # eq. (LossTaSIL): the loss runs over the partition without its last point T
+    all_targets = expert_targets(
+        expert, demos.states[:, :-1], demos.actions[:, :-1], spec.order, expert_jac
+    )
+    train_t = all_targets.take(jnp.asarray(train_idx))
+    val_t = all_targets.take(jnp.asarray(val_idx)) if len(val_idx) else train_t
+    pool = train_t.flat() if spec.reduction == "mean" else train_t
+    axis = 1 if spec.reduction == "mean" else 0
+    batch_size = min(settings.batch, int(pool.states.shape[axis]))
+
+    net = _Net(settings.activation, settings.output_activation)
+    lr_args = (jnp.asarray(float(settings.lr)), jnp.asarray(float(settings.steps)))
+    params = [(jnp.asarray(w), jnp.asarray(b)) for w, b in mlp0.params()]
+    opt_state = _adam(*lr_args, settings.schedule).init(params)
+    key = jax.random.PRNGKey(seed)
+
+    def run_chunk(params, opt_state, step0, n_steps):
+        return _run_chunk(
+            params, opt_state, key, jnp.asarray(step0), pool, lr_args, net=net, spec=spec,
+            schedule=settings.schedule,
+            n_steps=n_steps, batch_size=batch_size, axis=axis,
+        )  # fmt: skip
+
+    def eval_loss(p, targets):
+        return _eval_loss(p, targets, net=net, spec=spec)
+
+    hist_steps, hist_train, hist_val = [], [], []
+
+    def record(step, p):
+        tr = float(eval_loss(p, train_t))
+        va = float(eval_loss(p, val_t))
+        hist_steps.append(step)
+        hist_train.append(tr)
+        hist_val.append(va)
+        return va
+
+    best_val = record(0, params)
+    best_params, best_step = params, 0
+    step = 0
+    stop_reason = "steps"
+    disable = (not progress) or not _stderr_is_tty()
+    with tqdm(total=settings.steps, desc=f"{settings.method}", disable=disable) as bar:
+        while step < settings.steps:
+            n = min(settings.eval_every, settings.steps - step)
+            params, opt_state = run_chunk(params, opt_state, step, n)
+            step += n
+            bar.update(n)
+            va = record(step, params)
+            if not np.isfinite(va):
+                stop_reason = "non-finite loss"
+                break
+            if va < best_val:
+                best_val, best_params, best_step = va, params, step
+            bar.set_postfix(train=f"{hist_train[-1]:.3e}", val=f"{va:.3e}", best=best_step)
+            if step - best_step >= settings.patience and step < settings.steps:
+                stop_reason = "patience"
+                break
+    mlp = mlp_from_params(best_params, settings.activation, settings.output_activation)
+    return TrainResult(
+        mlp=mlp,
+        method=settings.method,
+        order=spec.order,
+        history=TrainHistory(tuple(hist_steps), tuple(hist_train), tuple(hist_val)),
+        best_step=best_step,
+        best_val_loss=float(best_val),
+        stop_reason=stop_reason,
+        wall_time_s=time.perf_counter() - t_start,
+        settings=settings,
+        train_index=tuple(int(i) for i in train_idx),
+        val_index=tuple(int(i) for i in val_idx),
+    )
+
+
+@dataclass(frozen=True)
+class _Net:
+    """Static description of the network's activations (hashable, for jit caching)."""
+
+    activation: str
+    output_activation: str | None
+
+    def policy(self, params) -> Callable:
+        return lambda x: apply_params(params, x, self.activation, self.output_activation, xp=jnp)
+
+
+def _adam(lr, total_steps, schedule: str) -> optax.GradientTransformation:
+    """Adam whose step size is ``lr`` (constant) or ``lr (1 + cos(pi min(i/total, 1))) / 2``
+    (cosine decay to 0, as ``optax.cosine_decay_schedule``). ``lr`` and ``total_steps`` may be
+    traced, so one compiled training step serves every learning rate and budget."""
+
+    def step_size(count):
+        if schedule == "constant":
+            return lr
+        frac = jnp.minimum(count / total_steps, 1.0)
+        return lr * 0.5 * (1.0 + jnp.cos(jnp.pi * frac))
+
+    return optax.adam(step_size)
+
+
+@partial(jax.jit, static_argnames=("net", "spec"))
+def _eval_loss(params, targets: Targets, *, net: _Net, spec):
+    return imitation_loss(net.policy(params), targets, spec)
+
+
+@partial(jax.jit, static_argnames=("net", "spec", "schedule", "n_steps", "batch_size", "axis"))
+def _run_chunk(
+    params, opt_state, key, step0, pool: Targets, lr_args, *, net, spec, schedule, n_steps,
+    batch_size, axis,
+):  # fmt: skip
+    """``n_steps`` Adam steps on seeded mini-batches drawn without replacement from ``pool``
+    along ``axis`` (states for the mean reduction, trajectories for the max reduction)."""
+    opt = _adam(*lr_args, schedule)
+    pool_size = pool.states.shape[axis]
+
+    def loss_of(p, targets):
+        return imitation_loss(net.policy(p), targets, spec)
+
+    def body(carry, step):
+        p, s = carry
+        idx = jax.random.choice(
+            jax.random.fold_in(key, step), pool_size, (batch_size,), replace=False
+        )
+        value, grads = jax.value_and_grad(loss_of)(p, _take_axis(pool, idx, axis))
+        updates, s = opt.update(grads, s, p)
+        return (optax.apply_updates(p, updates), s), value
+
+    (params, opt_state), _ = jax.lax.scan(body, (params, opt_state), step0 + jnp.arange(n_steps))
+    return params, opt_state
+
+
+def _stderr_is_tty() -> bool:
+    try:
+        return sys.stderr.isatty()
+    except (AttributeError, ValueError):
+        return False
+
+
+def _split(n_traj: int, val_fraction: float, rng: np.random.Generator):
+    """Seeded split of trajectory indices into (train, validation)."""
+    perm = rng.permutation(n_traj)
+    n_val = int(round(val_fraction * n_traj))
+    if val_fraction > 0 and n_traj >= 2:
+        n_val = min(max(n_val, 1), n_traj - 1)
+    else:
+        n_val = 0
+    return np.sort(perm[n_val:]), np.sort(perm[:n_val])
+
+
+def _take_axis(targets: Targets, idx, axis: int) -> Targets:
+    arrays = (targets.states, targets.actions, targets.jac, targets.hess)
+    return Targets(*(None if a is None else jnp.take(a, idx, axis=axis) for a in arrays))
+
+
+def settings_dict(settings: TrainSettings) -> dict:
+    """JSON-ready dictionary of ``settings`` (for reports)."""
+    out = asdict(settings)
+    out["hidden"] = list(settings.hidden)
+    return out
+
+
+def evaluate_gap(
+    field: Callable,
+    expert: Callable,
+    policy_apply: Callable,
+    x0s: np.ndarray,
+    T: float,
+    k: int,
+    substeps: int = DEFAULT_SUBSTEPS,
+) -> np.ndarray:
+    """Per-trajectory imitation gap ``max_{t in grid} ||x_hat_t - x*_t||_2``.
+
+    Rolls out the expert closed loop ``x*' = field(t, x*, expert(x*))`` and the learner closed
+    loop ``x_hat' = field(t, x_hat, policy_apply(x_hat))`` from the same initial states with the
+    same fixed-step RK4 integrator, sampled on ``{0, T/k, ..., T}``; this is the ``delta_err`` of
+    the TaSIL reference code and the policy imitation gap of DRIP's decomposition on the nominal
+    model. The max runs over the sample grid only, so it can underestimate the continuous-time
+    supremum between samples.
+
+    Returns
+    -------
+    numpy.ndarray
+        ``(N,)`` gaps; ``inf`` for a learner trajectory that diverges (NaN/inf states).
+    """
+    x_star = simulate_closed_loop(field, expert, x0s, T, k, substeps)
+    x_hat = simulate_closed_loop(field, policy_apply, x0s, T, k, substeps)
+    with np.errstate(invalid="ignore", over="ignore"):
+        gaps = np.max(np.linalg.norm(x_hat - x_star, axis=-1), axis=1)
+    finite = np.all(np.isfinite(x_hat), axis=(1, 2))
+    return np.where(finite, gaps, np.inf)
