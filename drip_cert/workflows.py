@@ -100,7 +100,7 @@ class ReproduceSettings:
     @staticmethod
     def make(quick: bool) -> ReproduceSettings:
         if quick:
-            return ReproduceSettings(steps=300, paths_paper=100, paths_ours=400, horizon=4.0,
+            return ReproduceSettings(steps=200, paths_paper=100, paths_ours=300, horizon=3.0,
                                      dt=2e-3)
         return ReproduceSettings()
 
