@@ -1,0 +1,210 @@
+"""Throughput of the Monte-Carlo engine against a plain numpy loop (trajectory-steps per second).
+
+System: the DRIP paper's 4-D example with seeded stand-ins for the learned parts,
+``f(x) = -0.05 x - 0.25 h(x)``, ``g = 0.25 I_4``, expert ``-0.2 x + h(x)``, ``h`` a tanh MLP 4-32-4,
+learned policy a tanh MLP 4-64-64-4, ``Lambda_mu = (0.1 + 0.05||x||) 1_4``,
+``Lambda_sigma = (0.1 + 0.05||x||^{1/2}) I_4``, ``p = 0``; L1-DRAC with ``lambda_s = 10``,
+``omega = 50``, ``T_s = 10 dt``. Scenario: learned policy + L1-DRAC on the true SDE (the same in
+both implementations). The engine's rate excludes JIT compilation (reported separately) and
+includes its per-chunk statistics. The numpy loop steps all paths together in a Python loop.
+
+Usage: ``python benchmarks/mc_throughput.py [--quick] [--paths N] [--T T] [--dt DT]``.
+The last line printed is ``engine X steps/s, numpy Y steps/s, ratio Zx``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import time
+
+import numpy as np
+
+from drip_cert._jax import jax, jnp
+from drip_cert.control.l1drac import L1Params
+from drip_cert.learn.mlp import MLP, init_mlp
+from drip_cert.sim.engine import SimConfig, _normals, build_chunk_fn, simulate
+from drip_cert.sim.model import SimModel, make_model
+
+N = 4
+
+
+def build_system(seed: int = 0) -> tuple[SimModel, MLP, MLP]:
+    """The benchmark system and its two seeded MLPs (h and the learned policy)."""
+    rng = np.random.default_rng(seed)
+    h = init_mlp([N, 32, N], rng)
+    pol = init_mlp([N, 64, 64, N], rng)
+
+    def f(t, x):
+        return -0.05 * x - 0.25 * h.apply_jax(x)
+
+    def expert(x):
+        return -0.2 * x + h.apply_jax(x)
+
+    def learned(x):
+        return pol.apply_jax(x)
+
+    def lam_mu(t, x):
+        return (0.1 + 0.05 * jnp.sqrt(jnp.sum(x * x))) * jnp.ones(N)
+
+    def lam_sigma(t, x):
+        return (0.1 + 0.05 * jnp.sqrt(jnp.sqrt(jnp.sum(x * x)))) * jnp.eye(N)
+
+    model = make_model(
+        N,
+        N,
+        N,
+        f,
+        0.25 * np.eye(N),
+        expert,
+        learned,
+        lam_mu=lam_mu,
+        lam_sigma=lam_sigma,
+        name="paper-4d-benchmark",
+    )
+    return model, h, pol
+
+
+def x0_sampler(key):
+    """xi ~ uniform on [-1, 1]^4."""
+    return jax.random.uniform(key, (N,), minval=-1.0, maxval=1.0)
+
+
+def numpy_loop(h: MLP, pol: MLP, l1: L1Params, n_paths: int, n_steps: int, seed: int) -> float:
+    """Seconds for the learned + L1-DRAC true SDE, all paths stepped together in numpy."""
+    rng = np.random.default_rng(seed)
+    dt = l1.dt
+    g = 0.25 * np.eye(N)
+    theta = np.linalg.solve(g.T @ g, g.T)
+    x = rng.uniform(-1.0, 1.0, size=(n_paths, N))
+    x_hat = x.copy()
+    eta = np.zeros((n_paths, N))
+    lam_hat = np.zeros((n_paths, N))
+    gain, decay, fgain = l1.adaptation_gain, l1.filter_decay, l1.filter_input_gain
+    sq = math.sqrt(dt)
+    t0 = time.perf_counter()
+    for j in range(n_steps):
+        if j > 0 and j % l1.k == 0:
+            lam_hat = gain * (x_hat - x)
+        u = -eta
+        fk = -0.05 * x - 0.25 * h.apply_np(x) + pol.apply_np(x) @ g.T
+        eta = decay * eta + fgain * (lam_hat @ theta.T)
+        x_hat = x_hat + dt * (-l1.lambda_s * (x_hat - x) + fk + u @ g.T + lam_hat)
+        nrm = np.sqrt(np.sum(x * x, axis=1, keepdims=True))
+        drift = fk + u @ g.T + (0.1 + 0.05 * nrm)
+        sig = 0.1 + 0.05 * np.sqrt(nrm)
+        x = x + dt * drift + sig * (sq * rng.standard_normal((n_paths, N)))
+    elapsed = time.perf_counter() - t0
+    assert np.all(np.isfinite(x))
+    return elapsed
+
+
+def _profile(model: SimModel, h: MLP, pol: MLP, n_paths: int, n_steps: int) -> None:
+    """ns per path-step of the main ingredients, each alone in a jitted time-major scan."""
+    key = jax.random.PRNGKey(0)
+    idx = jnp.arange(n_paths, dtype=jnp.uint32)
+    keys = jax.vmap(lambda i: jax.random.fold_in(key, i))(idx)
+    x0 = jax.random.uniform(key, (n_paths, N))
+
+    def loop(body):
+        def run(x):
+            def step(x, j):
+                return body(x, j), None
+
+            return jax.lax.scan(step, x, jnp.arange(n_steps, dtype=jnp.uint32))[0]
+
+        f = jax.jit(run)
+        f(x0).block_until_ready()
+        t0 = time.perf_counter()
+        f(x0).block_until_ready()
+        return (time.perf_counter() - t0) / (n_paths * n_steps) * 1e9
+
+    parts = {
+        "rng: engine (flat threefry + erfinv)": lambda x, j: x + 1e-3 * _normals(key, idx, j, N),
+        "rng: vmapped fold_in + normal per path": lambda x, j: (
+            x + 1e-3 * jax.vmap(lambda k: jax.random.normal(jax.random.fold_in(k, j), (N,)))(keys)
+        ),
+        "policy MLP 4-64-64-4": lambda x, j: x + 1e-3 * jax.vmap(pol.apply_jax)(x),
+        "h MLP 4-32-4": lambda x, j: x + 1e-3 * jax.vmap(h.apply_jax)(x),
+        "uncertainty (Lambda_mu, Lambda_sigma)": lambda x, j: (
+            x
+            + 1e-3
+            * (
+                jax.vmap(model.lam_mu, in_axes=(None, 0))(0.0, x)
+                + jnp.einsum("bnd,bd->bn", jax.vmap(model.lam_sigma, in_axes=(None, 0))(0.0, x), x)
+            )
+        ),
+    }
+    for name, body in parts.items():
+        print(f"  profile: {name:40s} {loop(body):7.1f} ns/path-step")
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--quick", action="store_true", help="1000 paths, T = 0.5")
+    ap.add_argument("--paths", type=int, default=None)
+    ap.add_argument("--T", type=float, default=None)
+    ap.add_argument("--dt", type=float, default=1e-3)
+    ap.add_argument("--chunk", type=int, default=None, help="engine chunk size (default: paths)")
+    ap.add_argument("--all-scenarios", action="store_true", help="also time the 4-scenario pass")
+    ap.add_argument("--no-profile", action="store_true")
+    args = ap.parse_args(argv)
+    n_paths = args.paths or (1000 if args.quick else 10_000)
+    T = args.T or (0.5 if args.quick else 5.0)
+    dt = args.dt
+    model, h, pol = build_system(0)
+    l1 = L1Params(omega=50.0, lambda_s=10.0, Ts=10 * dt, dt=dt)
+    n_steps = int(round(T / dt))
+    rec = 100 if n_steps % 100 == 0 else 1
+    cfg = SimConfig(
+        T=T,
+        dt=dt,
+        n_paths=n_paths,
+        chunk_size=args.chunk or n_paths,
+        scenarios=("learned_l1_true",),
+        l1=l1,
+        record_every=rec,
+        n_sample_paths=0,
+    )
+    print(f"system {model.name}: {n_paths} paths, T={T}, dt={dt}, {n_steps} steps")
+    res = simulate(model, cfg, x0_sampler, progress=False)
+    eng = n_paths * n_steps / res.run_s
+    print(f"  engine: compile {res.compile_s:.2f} s, run {res.run_s:.2f} s -> {eng:.3g} steps/s")
+    if args.all_scenarios:
+        cfg4 = SimConfig(
+            T=T,
+            dt=dt,
+            n_paths=n_paths,
+            chunk_size=args.chunk or n_paths,
+            l1=l1,
+            record_every=rec,
+            n_sample_paths=0,
+        )
+        r4 = simulate(model, cfg4, x0_sampler, progress=False)
+        print(
+            f"  engine, all 4 scenarios in one pass: compile {r4.compile_s:.2f} s, run "
+            f"{r4.run_s:.2f} s -> {n_paths * n_steps / r4.run_s:.3g} path-steps/s "
+            f"({4 * n_paths * n_steps / r4.run_s:.3g} trajectory-steps/s)"
+        )
+    if not args.no_profile:
+        # the raw chunk function without statistics, then the ingredients alone
+        fn = build_chunk_fn(model, cfg, x0_sampler)
+        idx = jnp.arange(n_paths, dtype=jnp.uint32)
+        jax.block_until_ready(fn(idx))
+        t0 = time.perf_counter()
+        jax.block_until_ready(fn(idx))
+        raw = time.perf_counter() - t0
+        print(
+            f"  profile: whole L1 step (no statistics)            "
+            f"{raw / (n_paths * n_steps) * 1e9:7.1f} ns/path-step"
+        )
+        _profile(model, h, pol, n_paths, min(n_steps, 500))
+    t_np = numpy_loop(h, pol, l1, n_paths, n_steps, seed=0)
+    npr = n_paths * n_steps / t_np
+    print(f"  numpy loop: {t_np:.2f} s")
+    print(f"engine {eng:.1e} steps/s, numpy {npr:.1e} steps/s, ratio {eng / npr:.1f}x")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,185 @@
+"""The simulation model: jax-traceable vector fields and policies of the DRIP paper.
+
+A :class:`SimModel` is the engine's only view of a system. It holds the known drift ``f`` (without
+any policy), the input operator ``g``, the known diffusion ``p``, the unknown drift and diffusion
+``Lambda_mu``/``Lambda_sigma`` of Definition "Vector Fields" of the DRIP paper (eq.
+``TrueVectorFields``; L1-DRAC eq. (1)), the expert and learned policies and ``Theta_ad`` of L1-DRAC
+Assumption 1. Every callable takes ONE path (unbatched arrays) and must be traceable by jax; the
+engine vmaps them. The lead's ``System`` produces a ``SimModel``; nothing here depends on it.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from drip_cert._jax import jax, jnp
+from drip_cert.errors import SpecError
+
+__all__ = ["SimModel", "make_model", "theta_ad_from_g"]
+
+
+@dataclass(frozen=True)
+class SimModel:
+    """Sizes and jax-traceable callables of one system (single path, unbatched).
+
+    Parameters
+    ----------
+    n, m, d
+        State, input and Brownian-motion dimensions.
+    f
+        ``f(t, x) -> (n,)``: known drift WITHOUT the policy (DRIP Definition "Vector Fields").
+    g
+        ``g(t) -> (n, m)``: input operator (time only, L1-DRAC Definition 1).
+    p
+        ``p(t, x) -> (n, d)``: known diffusion (may be identically zero).
+    lam_mu
+        ``Lambda_mu(t, x) -> (n,)``: unknown drift (DRIP / L1-DRAC (1)).
+    lam_sigma
+        ``Lambda_sigma(t, x) -> (n, d)``: unknown diffusion.
+    expert
+        ``pi*(x) -> (m,)``: the expert policy of (NominalProcesses).
+    learned
+        ``pi_IL(x) -> (m,)`` or ``None`` when no learned policy exists yet.
+    theta_ad
+        ``Theta_ad(t) -> (m, n)``, ``[I_m 0] gbar(t)^{-1}`` of L1-DRAC Assumption 1.
+    name
+        Free text; part of the resume hash of a Monte-Carlo run.
+    """
+
+    n: int
+    m: int
+    d: int
+    f: Callable
+    g: Callable
+    p: Callable
+    lam_mu: Callable
+    lam_sigma: Callable
+    expert: Callable
+    learned: Callable | None
+    theta_ad: Callable
+    name: str = "model"
+
+    def __post_init__(self) -> None:
+        for fld in ("n", "m", "d"):
+            v = getattr(self, fld)
+            if not isinstance(v, int | np.integer) or isinstance(v, bool) or int(v) < 1:
+                raise SpecError(f"must be a positive integer, got {v!r}", field=f"SimModel.{fld}")
+            object.__setattr__(self, fld, int(v))
+        if self.m > self.n:
+            raise SpecError(
+                f"input dimension m={self.m} exceeds state dimension n={self.n}; g must have "
+                "full column rank, so m <= n",
+                field="SimModel.m",
+            )
+        for fld in ("f", "g", "p", "lam_mu", "lam_sigma", "expert", "theta_ad"):
+            if not callable(getattr(self, fld)):
+                raise SpecError("must be a callable", field=f"SimModel.{fld}")
+        if self.learned is not None and not callable(self.learned):
+            raise SpecError("must be a callable or None", field="SimModel.learned")
+        self._check_shapes()
+
+    def _check_shapes(self) -> None:
+        """Trace every callable once (no FLOPs) and compare the output shapes with n, m, d."""
+        n, m, d = self.n, self.m, self.d
+        t = jax.ShapeDtypeStruct((), jnp.float64)
+        x = jax.ShapeDtypeStruct((n,), jnp.float64)
+        expected = {
+            "f": ((t, x), (n,)),
+            "g": ((t,), (n, m)),
+            "p": ((t, x), (n, d)),
+            "lam_mu": ((t, x), (n,)),
+            "lam_sigma": ((t, x), (n, d)),
+            "expert": ((x,), (m,)),
+            "theta_ad": ((t,), (m, n)),
+        }
+        if self.learned is not None:
+            expected["learned"] = ((x,), (m,))
+        for fld, (args, shape) in expected.items():
+            try:
+                out = jax.eval_shape(getattr(self, fld), *args)
+            except Exception as exc:  # user code: report which callable failed and why
+                raise SpecError(
+                    f"cannot be traced by jax on a single path ({type(exc).__name__}: {exc}); "
+                    "write it with jax.numpy on unbatched arrays",
+                    field=f"SimModel.{fld}",
+                ) from None
+            if getattr(out, "shape", None) != shape:
+                got = getattr(out, "shape", type(out).__name__)
+                raise SpecError(
+                    f"returns shape {got}, expected {shape} for n={n}, m={m}, d={d}",
+                    field=f"SimModel.{fld}",
+                )
+
+
+def theta_ad_from_g(g: Callable) -> Callable:
+    """``Theta_ad(t) = [I_m 0] gbar(t)^{-1} = (g^T g)^{-1} g^T`` (L1-DRAC Assumption 1).
+
+    For any ``g_perp`` with ``Im g_perp = ker g^T`` the first ``m`` rows ``L`` of
+    ``gbar^{-1} = [g g_perp]^{-1}`` satisfy ``L g = I_m`` and ``L g_perp = 0``, which the
+    left pseudo-inverse ``(g^T g)^{-1} g^T`` does; so ``Theta_ad`` does not depend on the choice of
+    ``g_perp`` and equals the pseudo-inverse of ``g``.
+    """
+
+    def theta_ad(t):
+        gt = g(t)
+        return jnp.linalg.solve(gt.T @ gt, gt.T)
+
+    return theta_ad
+
+
+def make_model(
+    n: int,
+    m: int,
+    d: int,
+    f: Callable,
+    g: Callable,
+    expert: Callable,
+    learned: Callable | None = None,
+    p: Callable | None = None,
+    lam_mu: Callable | None = None,
+    lam_sigma: Callable | None = None,
+    theta_ad: Callable | None = None,
+    name: str = "model",
+) -> SimModel:
+    """Build a :class:`SimModel` from plain jax functions, filling the optional ones.
+
+    ``p``, ``lam_mu`` and ``lam_sigma`` default to zero; ``theta_ad`` defaults to
+    :func:`theta_ad_from_g`. ``g`` may also be a constant ``(n, m)`` array.
+
+    Returns
+    -------
+    SimModel
+        The validated model (shapes checked by tracing).
+    """
+    if not callable(g):
+        g_arr = np.asarray(g, dtype=np.float64)
+        if g_arr.shape != (n, m):
+            raise SpecError(f"constant g has shape {g_arr.shape}, expected {(n, m)}", field="g")
+        g_const = jnp.asarray(g_arr)
+
+        def g(t):
+            return g_const
+
+    def _zero_drift(t, x):
+        return jnp.zeros((n,), dtype=jnp.float64)
+
+    def _zero_diffusion(t, x):
+        return jnp.zeros((n, d), dtype=jnp.float64)
+
+    return SimModel(
+        n=n,
+        m=m,
+        d=d,
+        f=f,
+        g=g,
+        p=p if p is not None else _zero_diffusion,
+        lam_mu=lam_mu if lam_mu is not None else _zero_drift,
+        lam_sigma=lam_sigma if lam_sigma is not None else _zero_diffusion,
+        expert=expert,
+        learned=learned,
+        theta_ad=theta_ad if theta_ad is not None else theta_ad_from_g(g),
+        name=name,
+    )

@@ -1,0 +1,368 @@
+"""Per-time statistics of imitation gaps, accumulated over chunks of Monte-Carlo paths.
+
+The DRIP paper decomposes the total imitation gap (TIG, Definition "ImitationGap") into the
+policy-induced gap ``E||x'_t - x*_t||`` and the uncertainty-induced gap ``E||X_t - x'_t||``
+(eq. Decomposition:IG:Components). For each gap and each recorded time this module accumulates,
+over paths, the power sums ``sum r^q`` (``q = 1, 2, 4, ..., 2 p_max``), the tail counts
+``#{r >= kappa}`` and the sample maximum, and turns them into
+
+* the mean with a CLT Student-t interval at a named level (two-sided);
+* the moments ``E r^{2p}`` and the ``L_{2p}`` norms ``E[r^{2p}]^{1/(2p)}`` that L1-DRAC
+  Theorem 4.1 bounds by ``rho_L1(p)``;
+* tail frequencies with one-sided Clopper-Pearson upper bounds (distribution-free, exact
+  binomial). No distribution-free bound on the MEAN is offered: without a known bound on the
+  support of the gap there is none (Hoeffding/Bernstein need one; the divergence cap is far too
+  loose to be useful);
+* the maximum over time of the mean gap with the interval at the argmax.
+
+Determinism: sums are added path by path in global path order (:func:`accumulate`), so the
+result does not depend on how paths were grouped into chunks, bit for bit.
+
+Also here: the empirical Wasserstein-2 distance between two sample clouds with POT's exact solver,
+and a same-law baseline (W2 between two independent samples of ONE law), because the empirical W2
+is biased upward in dimension >= 3 (math notes: a true 0.2 measured 0.5 at 4000 samples in 4-D).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.stats
+
+from drip_cert.errors import SpecError
+
+__all__ = [
+    "GapSums",
+    "GapStats",
+    "W2Estimate",
+    "accumulate",
+    "clopper_pearson_upper",
+    "finalize",
+    "new_sums",
+    "norms_sequential",
+    "t_interval",
+    "w2_empirical",
+]
+
+
+@dataclass(frozen=True)
+class GapSums:
+    """Running sums of one gap ``r_t = ||a_t - b_t||`` over paths (one value per recorded time).
+
+    Attributes
+    ----------
+    count
+        Number of valid paths added.
+    powers
+        The exponents ``q`` of ``power_sums``: ``(1, 2, 4, ..., 2 p_max)``.
+    power_sums
+        ``(len(powers), n_times)``: ``sum_paths r_t^q``.
+    kappas
+        Tail thresholds.
+    tail_counts
+        ``(len(kappas), n_times)`` int64: ``#{paths: r_t >= kappa}``.
+    max
+        ``(n_times,)``: sample maximum of ``r_t`` (``-inf`` when empty).
+    """
+
+    count: int
+    powers: tuple[int, ...]
+    power_sums: np.ndarray
+    kappas: tuple[float, ...]
+    tail_counts: np.ndarray
+    max: np.ndarray
+
+
+def new_sums(n_times: int, p_max: int, kappas: tuple[float, ...] = ()) -> GapSums:
+    """Empty :class:`GapSums` for ``n_times`` recorded times and moments up to ``2 p_max``."""
+    if int(p_max) < 1:
+        raise SpecError(f"p_max must be an integer >= 1, got {p_max!r}", field="p_max")
+    powers = (1, *(2 * p for p in range(1, int(p_max) + 1)))
+    kappas = tuple(float(k) for k in kappas)
+    if any(not (np.isfinite(k) and k > 0) for k in kappas):
+        raise SpecError(f"tail thresholds must be finite and > 0, got {kappas}", field="kappas")
+    return GapSums(
+        count=0,
+        powers=powers,
+        power_sums=np.zeros((len(powers), n_times)),
+        kappas=kappas,
+        tail_counts=np.zeros((len(kappas), n_times), dtype=np.int64),
+        max=np.full(n_times, -np.inf),
+    )
+
+
+def norms_sequential(diff: np.ndarray) -> np.ndarray:
+    """Euclidean norms over the last axis, summing squares left to right.
+
+    The fixed left-to-right order makes each norm depend on its own row only (not on the array
+    shape or the vectorisation numpy picks), which the chunk-size invariance needs.
+    """
+    diff = np.asarray(diff, dtype=np.float64)
+    acc = diff[..., 0] * diff[..., 0]
+    for c in range(1, diff.shape[-1]):
+        acc = acc + diff[..., c] * diff[..., c]
+    return np.sqrt(acc)
+
+
+def accumulate(sums: GapSums, r: np.ndarray, valid: np.ndarray) -> GapSums:
+    """Add the paths of one chunk, in order, to ``sums`` (pure: returns a new object).
+
+    Parameters
+    ----------
+    sums
+        The running sums.
+    r
+        ``(n_paths_chunk, n_times)``: gap norms of the chunk's paths, in global path order.
+    valid
+        ``(n_paths_chunk,)`` bool: paths to include (diverged and padding paths excluded).
+
+    Notes
+    -----
+    The power sums are updated one path at a time (a sequential left fold), so the result for
+    a set of paths is the same floating-point number however the paths were split into chunks.
+    """
+    r = np.asarray(r, dtype=np.float64)
+    valid = np.asarray(valid, dtype=bool)
+    if r.ndim != 2 or r.shape[1] != sums.power_sums.shape[1] or valid.shape != (r.shape[0],):
+        raise ValueError(f"r must be (paths, {sums.power_sums.shape[1]}), got {r.shape}")
+    rv = r[valid]
+    ps = sums.power_sums.copy()
+    if rv.shape[0]:
+        vals = np.stack([rv**q for q in sums.powers], axis=1)  # (paths, powers, times)
+        # sequential left fold in path order: (((acc + v0) + v1) + ...)
+        folded = np.add.accumulate(np.concatenate([ps[None], vals], axis=0), axis=0)
+        ps = folded[-1].copy()
+    tails = sums.tail_counts.copy()
+    for i, kappa in enumerate(sums.kappas):
+        tails[i] += np.count_nonzero(rv >= kappa, axis=0)
+    mx = np.maximum(sums.max, rv.max(axis=0)) if rv.shape[0] else sums.max.copy()
+    return GapSums(
+        count=sums.count + int(rv.shape[0]),
+        powers=sums.powers,
+        power_sums=ps,
+        kappas=sums.kappas,
+        tail_counts=tails,
+        max=mx,
+    )
+
+
+def t_interval(s1, s2, n: int, level: float):
+    """Two-sided Student-t confidence interval for a mean from power sums.
+
+    Parameters
+    ----------
+    s1, s2
+        ``sum x`` and ``sum x^2`` (arrays of equal shape).
+    n
+        Number of samples (>= 2 for a finite interval).
+    level
+        Confidence level in (0, 1), e.g. 0.95.
+
+    Returns
+    -------
+    mean, low, high : np.ndarray
+        Sample mean and the interval ``mean -+ t_{(1+level)/2, n-1} s / sqrt(n)``.
+    """
+    s1 = np.asarray(s1, dtype=np.float64)
+    s2 = np.asarray(s2, dtype=np.float64)
+    if n < 1:
+        nan = np.full(s1.shape, np.nan)
+        return nan, nan.copy(), nan.copy()
+    mean = s1 / n
+    if n < 2:
+        return mean, np.full(s1.shape, -np.inf), np.full(s1.shape, np.inf)
+    var = np.maximum(s2 - s1 * s1 / n, 0.0) / (n - 1)
+    half = scipy.stats.t.ppf(0.5 + 0.5 * level, n - 1) * np.sqrt(var / n)
+    return mean, mean - half, mean + half
+
+
+def clopper_pearson_upper(k, n: int, level: float):
+    """One-sided Clopper-Pearson upper confidence bound on a binomial proportion.
+
+    ``P(p <= upper) >= level`` for ``k`` successes in ``n`` trials, with no distributional
+    assumption beyond independence: ``upper = Beta^{-1}(level; k + 1, n - k)`` and 1 when
+    ``k = n`` (for ``k = 0`` this is ``1 - (1 - level)^{1/n}``).
+    """
+    k = np.asarray(k, dtype=np.float64)
+    if n < 1:
+        return np.ones(k.shape)
+    with np.errstate(invalid="ignore"):
+        up = scipy.stats.beta.ppf(level, k + 1.0, np.maximum(n - k, 1e-300))
+    return np.where(k >= n, 1.0, up)
+
+
+@dataclass(frozen=True)
+class GapStats:
+    """Statistics of one gap over the recorded times (see the module docstring).
+
+    Attributes
+    ----------
+    name
+        E.g. ``"policy"``, ``"total_l1"``, ``"uncertainty_l1"``.
+    times
+        ``(n_times,)`` recorded times.
+    n
+        Number of valid paths.
+    level
+        Confidence level of ``ci_low``/``ci_high`` and of the Clopper-Pearson bounds.
+    mean, ci_low, ci_high
+        ``(n_times,)``: mean of ``r_t`` and its two-sided t interval (CLT; not distribution-free).
+    moments
+        ``(p_max, n_times)``: ``E r_t^{2p}``, ``p = 1..p_max``.
+    lp_norms
+        ``(p_max, n_times)``: ``(E r_t^{2p})^{1/(2p)}`` (compare with ``rho_L1(p)``).
+    kappas, tail_freq, tail_upper
+        Thresholds, ``P(r_t >= kappa)`` estimates ``(n_kappa, n_times)`` and their one-sided
+        Clopper-Pearson upper bounds at ``level`` (distribution-free).
+    sample_max
+        ``(n_times,)`` largest observed ``r_t``.
+    max_mean, argmax_time, max_ci_low, max_ci_high
+        ``max_t mean`` (a finite-grid estimate of the gap's ``Upsilon_T``), the time where it is
+        attained, and the t interval there.
+    """
+
+    name: str
+    times: np.ndarray
+    n: int
+    level: float
+    mean: np.ndarray
+    ci_low: np.ndarray
+    ci_high: np.ndarray
+    moments: np.ndarray
+    lp_norms: np.ndarray
+    kappas: tuple[float, ...]
+    tail_freq: np.ndarray
+    tail_upper: np.ndarray
+    sample_max: np.ndarray
+    max_mean: float
+    argmax_time: float
+    max_ci_low: float
+    max_ci_high: float
+
+    def to_dict(self) -> dict:
+        """JSON-ready summary (maximum over time, final-time values, tails at the final time)."""
+        from drip_cert.provenance import json_float
+
+        return {
+            "name": self.name,
+            "n_valid": int(self.n),
+            "level": float(self.level),
+            "max_mean": json_float(self.max_mean),
+            "argmax_time": json_float(self.argmax_time),
+            "max_ci": [json_float(self.max_ci_low), json_float(self.max_ci_high)],
+            "max_over_t_lp_norms": [json_float(v) for v in np.max(self.lp_norms, axis=1)],
+            "final_mean": json_float(self.mean[-1]),
+            "final_ci": [json_float(self.ci_low[-1]), json_float(self.ci_high[-1])],
+            "kappas": list(self.kappas),
+            "max_over_t_tail_freq": [json_float(v) for v in np.max(self.tail_freq, axis=1)]
+            if self.kappas
+            else [],
+            "max_over_t_tail_upper": [json_float(v) for v in np.max(self.tail_upper, axis=1)]
+            if self.kappas
+            else [],
+        }
+
+
+def finalize(name: str, sums: GapSums, times: np.ndarray, level: float) -> GapStats:
+    """Turn :class:`GapSums` into :class:`GapStats` at confidence ``level``."""
+    if not 0.0 < level < 1.0:
+        raise SpecError(f"confidence level must be in (0, 1), got {level!r}", field="ci_level")
+    n = sums.count
+    times = np.asarray(times, dtype=np.float64)
+    mean, lo, hi = t_interval(sums.power_sums[0], sums.power_sums[1], n, level)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        moments = sums.power_sums[1:] / n if n else np.full(sums.power_sums[1:].shape, np.nan)
+        orders = np.array([2.0 * p for p in range(1, len(sums.powers))])[:, None]
+        lp = moments ** (1.0 / orders)
+        tail_freq = (sums.tail_counts / n if n else np.full(sums.tail_counts.shape, np.nan)).astype(
+            np.float64
+        )
+    tail_up = clopper_pearson_upper(sums.tail_counts, n, level)
+    if n and np.any(np.isfinite(mean)):
+        i = int(np.nanargmax(mean))
+        mmax, tmax, mlo, mhi = float(mean[i]), float(times[i]), float(lo[i]), float(hi[i])
+    else:
+        mmax = tmax = mlo = mhi = float("nan")
+    return GapStats(
+        name=name,
+        times=times,
+        n=n,
+        level=float(level),
+        mean=mean,
+        ci_low=lo,
+        ci_high=hi,
+        moments=moments,
+        lp_norms=lp,
+        kappas=sums.kappas,
+        tail_freq=tail_freq,
+        tail_upper=np.asarray(tail_up, dtype=np.float64),
+        sample_max=sums.max,
+        max_mean=mmax,
+        argmax_time=tmax,
+        max_ci_low=mlo,
+        max_ci_high=mhi,
+    )
+
+
+def w2_empirical(a: np.ndarray, b: np.ndarray) -> float:
+    """Exact W2 between the empirical measures of two clouds (uniform weights), POT ``emd2``.
+
+    Parameters
+    ----------
+    a, b
+        ``(N_a, n)`` and ``(N_b, n)`` samples; rows with non-finite entries must be removed first.
+
+    Returns
+    -------
+    float
+        ``W2 = (min_coupling sum pi_ij ||a_i - b_j||^2)^{1/2}``.
+    """
+    import ot
+
+    a = np.asarray(a, dtype=np.float64)
+    b = np.asarray(b, dtype=np.float64)
+    if a.ndim != 2 or b.ndim != 2 or a.shape[1] != b.shape[1] or not len(a) or not len(b):
+        raise ValueError(f"need two non-empty clouds of equal dimension, got {a.shape}, {b.shape}")
+    cost = ot.dist(a, b, metric="sqeuclidean")
+    wa = np.full(len(a), 1.0 / len(a))
+    wb = np.full(len(b), 1.0 / len(b))
+    val = float(ot.emd2(wa, wb, cost, numItermax=10_000_000))
+    return float(np.sqrt(max(val, 0.0)))
+
+
+@dataclass(frozen=True)
+class W2Estimate:
+    """Empirical W2 between two laws at one time, with same-law baselines.
+
+    Attributes
+    ----------
+    pair
+        E.g. ``("learned_l1_true", "expert_nominal")``.
+    time
+        The recorded time used.
+    n_points
+        Sample size of each cloud.
+    w2
+        W2 between INDEPENDENT samples of the two laws (disjoint path sets).
+    baseline_a, baseline_b
+        W2 between two independent samples of the same size of law ``a`` (resp. ``b``): the
+        finite-sample bias of the estimator; a ``w2`` not clearly above them says nothing.
+    """
+
+    pair: tuple[str, str]
+    time: float
+    n_points: int
+    w2: float
+    baseline_a: float
+    baseline_b: float
+
+    def to_dict(self) -> dict:
+        """JSON-ready dictionary."""
+        return {
+            "pair": list(self.pair),
+            "time": self.time,
+            "n_points": self.n_points,
+            "w2": self.w2,
+            "same_law_baseline": [self.baseline_a, self.baseline_b],
+        }
