@@ -1,0 +1,246 @@
+"""Tests of drip_cert.learn.mlp_bounds: activation constants, Lipschitz and Jacobian-Lipschitz
+bounds of MLPs (DRIP Assumption PolicyRegularity), LipSDP, interval enclosures."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from drip_cert._jax import jax, jnp
+from drip_cert.errors import SpecError
+from drip_cert.learn.mlp import MLP, activation_fn, init_mlp
+from drip_cert.learn.mlp_bounds import (
+    activation_bounds,
+    enclose_jacobian,
+    enclose_output,
+    jacobian_lipschitz_bound,
+    jacobian_np,
+    lipschitz_bound,
+    lipschitz_lipsdp,
+    lipschitz_product,
+)
+from drip_cert.provenance import How
+
+# a sup over a grid of spacing 1e-4 misses the true sup of a smooth function by O(h^2) ~ 1e-8
+GRID_SUP_TOL = 1e-7
+# forward-mode Jacobian vs jax autodiff: both exact up to a few roundings of O(1) numbers
+AUTODIFF_TOL = 1e-12
+# central finite differences with step 1e-6: truncation O(h^2) ~ 1e-12, rounding O(eps/h) ~ 1e-10
+FD_TOL = 1e-8
+# LipSDP vs product bound: LipSDP is never larger in exact arithmetic; the solver margin (1e-7
+# relative) and Clarabel's tolerances (~1e-8) may add a few 1e-6 at most
+LIPSDP_SLACK = 1e-5
+# LipSDP on a network whose exact Lipschitz constant is known: solver accuracy ~1e-6 relative
+LIPSDP_EXACT_TOL = 1e-4
+# SCS (first order, eps ~1e-4 relative by default) may end a little above Clarabel's optimum
+SCS_VS_CLARABEL = 1.05
+# the one-hidden-layer scalar Jacobian-Lipschitz bound is exact up to the 1e-12 norm inflation
+EXACT_REL_TOL = 1e-10
+
+ACTS = ("tanh", "gelu")
+
+
+def _nets(rng: np.random.Generator, act: str, count: int = 4) -> list[MLP]:
+    """Small random nets of varied depth, with biases, some with a tanh output."""
+    out = []
+    shapes = [(3, 8, 2), (4, 6, 6, 3), (2, 5, 5, 5, 1), (5, 7, 4)]
+    for i in range(count):
+        sizes = shapes[i % len(shapes)]
+        m = init_mlp(sizes, rng, act, output_activation="tanh" if i == 3 else None, scale=1.5)
+        biases = tuple(rng.normal(size=b.shape) for b in m.biases)
+        out.append(MLP(m.weights, biases, act, m.output_activation))
+    return out
+
+
+# ----------------------------------------------------------------- activation constants
+
+
+@pytest.mark.parametrize("act", ACTS)
+def test_activation_constants_match_dense_grid_of_autodiff(act):
+    f = activation_fn(act, jnp)
+    d1 = jax.vmap(jax.grad(f))
+    d2 = jax.vmap(jax.grad(jax.grad(f)))
+    # [-20, 20] so that limits at infinity (inf tanh' = 0) are approached to 1e-16
+    z = jnp.linspace(-20.0, 20.0, 400_001)
+    s1, s2 = np.asarray(d1(z)), np.asarray(d2(z))
+    ab = activation_bounds(act)
+    assert ab.slope_hi >= s1.max() and ab.slope_hi - s1.max() < GRID_SUP_TOL
+    assert ab.slope_lo <= s1.min() and s1.min() - ab.slope_lo < GRID_SUP_TOL
+    assert ab.abs_curv >= np.abs(s2).max() and ab.abs_curv - np.abs(s2).max() < GRID_SUP_TOL
+    assert ab.abs_slope == max(abs(ab.slope_lo), abs(ab.slope_hi))
+
+
+def test_activation_closed_forms():
+    assert activation_bounds("tanh").abs_curv == pytest.approx(4 / (3 * math.sqrt(3)), rel=1e-14)
+    gelu = activation_bounds("gelu")
+    assert gelu.abs_curv == pytest.approx(math.sqrt(2 / math.pi), rel=1e-14)
+    # the brief's numbers: sup GELU' ~ 1.1289, inf GELU' ~ -0.1289, and they sum to 1 (GELU' is
+    # Phi(z) + z phi(z), so GELU'(z) + GELU'(-z) = 1)
+    assert gelu.slope_hi == pytest.approx(1.1289, abs=1e-4)
+    assert gelu.slope_hi + gelu.slope_lo == pytest.approx(1.0, abs=1e-14)
+    with pytest.raises(SpecError, match="relu"):
+        activation_bounds("relu")
+
+
+# ----------------------------------------------------------------- Jacobian, Lipschitz
+
+
+@pytest.mark.parametrize("act", ACTS)
+def test_jacobian_np_matches_jax_and_finite_differences(act):
+    rng = np.random.default_rng(1)
+    for net in _nets(rng, act):
+        x = rng.normal(size=(5, net.in_dim))
+        J = jacobian_np(net, x)
+        Jax = np.asarray(jax.jit(jax.vmap(jax.jacfwd(net.apply_jax)))(jnp.asarray(x)))
+        np.testing.assert_allclose(J, Jax, atol=AUTODIFF_TOL, rtol=0)
+        h = 1e-6
+        for i in range(net.in_dim):
+            e = np.zeros(net.in_dim)
+            e[i] = h
+            fd = (net.apply_np(x + e) - net.apply_np(x - e)) / (2 * h)
+            np.testing.assert_allclose(J[..., i], fd, atol=FD_TOL, rtol=0)
+
+
+@pytest.mark.parametrize("act", ACTS)
+def test_lipschitz_bounds_dominate_sampled_ratios_and_gradients(act):
+    rng = np.random.default_rng(2)
+    for net in _nets(rng, act):
+        L = lipschitz_product(net)
+        assert L.how == How.SOUND
+        x = rng.normal(size=(2000, net.in_dim)) * 2
+        y = x + rng.normal(size=x.shape) * rng.uniform(1e-3, 2, size=(2000, 1))
+        ratio = np.linalg.norm(net.apply_np(x) - net.apply_np(y), axis=1) / np.linalg.norm(
+            x - y, axis=1
+        )
+        grad = np.linalg.norm(jacobian_np(net, x), ord=2, axis=(1, 2))
+        assert ratio.max() <= L.value
+        assert grad.max() <= L.value
+
+
+@pytest.mark.parametrize("act", ACTS)
+def test_lipsdp_between_sampled_gradients_and_product(act):
+    rng = np.random.default_rng(3)
+    for net in _nets(rng, act, count=3):
+        res = lipschitz_lipsdp(net)
+        assert res.status == "optimal" and res.value is not None
+        assert res.check.holds and res.check.margin > 0
+        assert res.value <= res.product * (1 + LIPSDP_SLACK)
+        x = rng.normal(size=(3000, net.in_dim)) * 2
+        grad = np.linalg.norm(jacobian_np(net, x), ord=2, axis=(1, 2))
+        assert grad.max() <= res.value
+        q = lipschitz_bound(net, "lipsdp")
+        assert q.value == res.best and q.how == How.SOUND
+
+
+def test_lipsdp_exact_cases():
+    # tanh layer with identity weights: Lipschitz constant exactly 1 (tanh'(0) = 1)
+    n = 3
+    net = MLP((np.eye(n), np.eye(n)), (np.zeros(n), np.zeros(n)), "tanh")
+    assert lipschitz_lipsdp(net).value == pytest.approx(1.0, rel=LIPSDP_EXACT_TOL)
+    # scalar chain x -> w1 tanh(w0 x): Lipschitz constant |w0 w1|
+    net = MLP((np.array([[2.0]]), np.array([[-3.0]])), (np.zeros(1), np.zeros(1)), "tanh")
+    assert lipschitz_lipsdp(net).value == pytest.approx(6.0, rel=LIPSDP_EXACT_TOL)
+    # an affine map has no hidden layer: LipSDP not applicable, the product bound is used
+    aff = MLP((np.array([[3.0, 4.0]]),), (np.zeros(1),), "tanh")
+    res = lipschitz_lipsdp(aff)
+    assert res.value is None and res.best == pytest.approx(5.0, rel=EXACT_REL_TOL)
+    with pytest.raises(SpecError, match="method"):
+        lipschitz_bound(aff, "magic")
+
+
+def test_lipsdp_scs_path_and_size_guard():
+    rng = np.random.default_rng(8)
+    net = _nets(rng, "gelu")[1]
+    clarabel = lipschitz_lipsdp(net, solver="CLARABEL")
+    scs = lipschitz_lipsdp(net, solver="SCS")
+    # SCS is less accurate, but the Schur re-certification keeps it sound and close
+    assert scs.check.holds and scs.value >= clarabel.value * (1 - LIPSDP_EXACT_TOL)
+    assert scs.value <= clarabel.value * SCS_VS_CLARABEL
+    skipped = lipschitz_lipsdp(net, max_dim=3)
+    assert skipped.status == "too_large" and skipped.value is None
+    assert skipped.best == lipschitz_product(net).value
+    with pytest.raises(SpecError, match="solver"):
+        lipschitz_lipsdp(net, solver="MOSEK")
+
+
+@pytest.mark.parametrize("act", ACTS)
+def test_jacobian_lipschitz_dominates_sampled_ratios(act):
+    rng = np.random.default_rng(4)
+    for net in _nets(rng, act):
+        Ld = jacobian_lipschitz_bound(net)
+        assert Ld.how == How.SOUND
+        x = rng.normal(size=(3000, net.in_dim)) * 1.5
+        for scale in (1e-4, 1e-2, 1.0):
+            y = x + rng.normal(size=x.shape) * scale
+            dJ = np.linalg.norm(jacobian_np(net, x) - jacobian_np(net, y), ord=2, axis=(1, 2))
+            ratio = dJ / np.linalg.norm(x - y, axis=1)
+            assert ratio.max() <= Ld.value
+
+
+@pytest.mark.parametrize("act", ACTS)
+def test_jacobian_lipschitz_exact_for_scalar_one_hidden_layer(act):
+    # f(x) = w1 s(w0 x): f'' = w1 w0^2 s''(w0 x), so Lip(f') = |w1| w0^2 sup|s''| exactly
+    w0, w1 = 1.7, -0.6
+    net = MLP((np.array([[w0]]), np.array([[w1]])), (np.array([0.3]), np.array([0.1])), act)
+    want = abs(w1) * w0**2 * activation_bounds(act).abs_curv
+    assert jacobian_lipschitz_bound(net).value == pytest.approx(want, rel=EXACT_REL_TOL)
+
+
+# ----------------------------------------------------------------- interval enclosures
+
+
+@pytest.mark.parametrize("act", ACTS)
+def test_enclosures_contain_sampled_values(act):
+    rng = np.random.default_rng(5)
+    for net in _nets(rng, act):
+        n = net.in_dim
+        for width in (1e-6, 0.05, 0.5, 2.0):
+            centre = rng.normal(size=(20, n))
+            lo = centre - width * rng.uniform(0, 1, size=(20, n))
+            hi = centre + width * rng.uniform(0, 1, size=(20, n))
+            ylo, yhi = enclose_output(net, lo, hi)
+            jlo, jhi = enclose_jacobian(net, lo, hi)
+            assert ylo.shape == (20, net.out_dim) and jlo.shape == (20, net.out_dim, n)
+            u = rng.uniform(size=(200, 20, n))
+            u[:4] = rng.integers(0, 2, size=(4, 20, n))  # some corners
+            pts = lo + u * (hi - lo)
+            y = net.apply_np(pts)
+            J = jacobian_np(net, pts)
+            assert np.all(ylo <= y) and np.all(y <= yhi)
+            assert np.all(jlo <= J) and np.all(J <= jhi)
+
+
+def test_enclosures_of_a_point_are_tight_and_of_wider_boxes_monotone():
+    rng = np.random.default_rng(6)
+    net = _nets(rng, "gelu")[1]
+    x = rng.normal(size=net.in_dim)
+    ylo, yhi = enclose_output(net, x, x)
+    jlo, jhi = enclose_jacobian(net, x, x)
+    # a degenerate box encloses the point value to a few ulps (outward rounding only)
+    assert np.max(yhi - ylo) < 1e-12 and np.max(jhi - jlo) < 1e-12
+    w_prev = 0.0
+    for r in (1e-3, 1e-2, 1e-1, 1.0):
+        jl, jh = enclose_jacobian(net, x - r, x + r)
+        w = float(np.max(jh - jl))
+        assert w >= w_prev
+        w_prev = w
+
+
+def test_gelu_output_enclosure_spans_its_minimum():
+    # a single GELU unit on a box straddling the minimiser z* ~ -0.7518 must go down to GELU(z*)
+    net = MLP((np.eye(1), np.eye(1)), (np.zeros(1), np.zeros(1)), "gelu")
+    ylo, yhi = enclose_output(net, np.array([-2.0]), np.array([1.0]))
+    z = np.linspace(-2, 1, 300_001)
+    g = activation_fn("gelu", np)(z)
+    assert ylo[0] <= g.min() and g.min() - ylo[0] < GRID_SUP_TOL
+    assert yhi[0] >= g.max()
+
+
+def test_box_errors_name_the_problem():
+    net = _nets(np.random.default_rng(7), "tanh")[0]
+    with pytest.raises(SpecError, match="swap"):
+        enclose_jacobian(net, np.ones(3), np.zeros(3))
+    with pytest.raises(SpecError, match="shape"):
+        enclose_output(net, np.zeros(2), np.zeros(2))
