@@ -26,6 +26,10 @@ from drip_cert.system.blocks import BlockFunction, block_applications, mlp_block
 from drip_cert.system.system import System
 
 POLICY_BLOCK = "pi_il"  #: block name of a trained policy inside the System
+TAU_MARGIN = 1.25
+#: held-out thresholds tau_j = 1.25 x the training maxima of h_j: any tau computed from the training
+#: data is valid for the held-out form (math/tasil.md 3.3 c); the bare maxima are exceeded by about
+#: 1/n of fresh states, which alone spends the form's confidence budget
 
 _DEFAULTS: dict[str, Any] = {
     "method": "tasil",  # "tasil" | "bc"
@@ -288,8 +292,11 @@ def tasil_section(s: System, train: Demonstrations, heldout: Demonstrations | No
     h_train, how_t = trajectory_h(s, train, L_Delta, contraction_global)
     h_val, _ = (trajectory_h(s, heldout, L_Delta, contraction_global) if heldout is not None
                 else (None, how_t))
+    # thresholds computed from the training data only (valid for the held-out form): the
+    # training maxima with a 25 % margin, so that fresh states rarely exceed them
+    tau = (TAU_MARGIN * max(h.h0 for h in h_train), TAU_MARGIN * max(h.h1 for h in h_train))
     cert = tasil_certificate(
-        [h.h0 for h in h_train], [h.h1 for h in h_train], gamma0=gamma0.value,
+        [h.h0 for h in h_train], [h.h1 for h in h_train], gamma0=gamma0.value, tau=tau,
         L_Delta=L_Delta, delta=settings.delta, eta=settings.eta, R=settings.tube_radius,
         heldout_h0=None if h_val is None else [h.h0 for h in h_val],
         heldout_h1=None if h_val is None else [h.h1 for h in h_val],
