@@ -58,8 +58,8 @@ def certificate_markdown(cert: Any) -> str:
                   f"h0 = {_f(t.get('h0'))}, h1 = {_f(t.get('h1'))}, gamma0 = "
                   f"{_f(t.get('gamma0'))}, L_Delta = {_f(t.get('L_Delta'))}, deterministic gap "
                   f"bound {_f(t.get('gap_bound'))}, rho_TaSIL = {_f(t.get('rho'))} "
-                  f"(delta = {_f(t.get('delta'))}, n = {t.get('n')}); vacuous forms: "
-                  f"{', '.join(t.get('vacuous') or []) or 'none'}.",
+                  f"(delta = {_f(t.get('delta'))}, n = {t.get('n')}); vacuous or failing "
+                  f"forms: {', '.join(t.get('vacuous_forms') or []) or 'none'}.",
                   "", f"_{t.get('label', '')}_"]
     if d.get("l1drac"):
         lines += ["", "## L1-DRAC design", "", l1_design_text(d["l1drac"])]
