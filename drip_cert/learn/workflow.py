@@ -22,7 +22,7 @@ from drip_cert.errors import SpecError
 from drip_cert.learn.data import Demonstrations, generate_demonstrations
 from drip_cert.learn.mlp import MLP
 from drip_cert.provenance import How, Quantity
-from drip_cert.system.blocks import BlockFunction, block_applications, mlp_block
+from drip_cert.system.blocks import mlp_block
 from drip_cert.system.system import System
 
 POLICY_BLOCK = "pi_il"  #: block name of a trained policy inside the System
@@ -143,60 +143,54 @@ def learned_system(s: System, mlp: MLP, name: str = POLICY_BLOCK, source: str = 
 
 
 # ------------------------------------------------------------------ regularity (L_Delta)
-def jacobian_lipschitz(s: System, which: str) -> Quantity:
+def jacobian_lipschitz(s: System, which: str, box: np.ndarray | None = None) -> Quantity:
     """A bound on the Lipschitz constant of the Jacobian of ``pi*`` or ``pi_IL`` (operator norm;
     DRIP Assumption "PolicyRegularity" (b)).
 
     Routes: zero Hessian (affine policy, exact 0); a policy ``A x + b + C h(x)`` linear in MLP
     blocks applied to the state gives ``sum ||C_h||_2 L_dh`` with the sound layerwise bound of
-    :func:`drip_cert.learn.mlp_bounds.jacobian_lipschitz_bound`; anything else is a sampled
+    :func:`drip_cert.learn.mlp_bounds.jacobian_lipschitz_bound` (global); a policy without blocks
+    gets a sound bound on ``box`` from interval enclosures of its second derivatives
+    (``||d^2 pi|| <= ||d^2 pi||_F``), valid on that box only; anything else is a sampled
     estimate of ``sup ||d^2 pi||_F`` (labelled so).
     """
+    from drip_cert.analysis.closed_loop import affine_in_blocks
     from drip_cert.learn.mlp_bounds import jacobian_lipschitz_bound
 
     pol = sp.Matrix(s.policy(which))
-    x = s.states
-    apps = set()
-    for e in pol:
-        apps |= block_applications(e)
-    # replace each block application by a symbol and check linearity in those symbols
-    syms = {a: sp.Dummy(str(type(a).__name__)) for a in apps}
-    lin = pol.xreplace(syms)
-    ok = all(a.args == tuple(x) and not a.deriv for a in apps)
-    if ok:
-        for e in lin:
-            for z in list(syms.values()) + list(x):
-                if sp.diff(e, z, 2) != 0:
-                    ok = False
-            for z1 in syms.values():
-                for z2 in list(syms.values()) + list(x):
-                    if z1 != z2 and sp.diff(e, z1, z2) != 0:
-                        ok = False
-    if ok:
+    dec = affine_in_blocks(pol, s)
+    if dec is not None and all(s.blocks[b].mlp is not None for b in dec.C):
+        if not dec.C:
+            return Quantity(f"L_dpi_{which}", 0.0, How.EXACT,
+                            "DRIP Assumption PolicyRegularity (b)", "affine policy: zero Hessian")
         total, notes = 0.0, []
-        by_block: dict[str, list[BlockFunction]] = {}
-        for a in apps:
-            by_block.setdefault(a.block_name, []).append(a)
-        for bname, members in sorted(by_block.items()):
-            block = s.blocks[bname]
-            if block.mlp is None:
-                ok = False
-                break
-            C = np.zeros((s.m, block.out_dim))
-            for a in members:
-                for i, e in enumerate(lin):
-                    C[i, a.out_index] = float(sp.diff(e, syms[a]))
+        for bname, C in sorted(dec.C.items()):
             c2 = float(np.linalg.norm(C, 2))
-            L = jacobian_lipschitz_bound(block.mlp).value
+            L = jacobian_lipschitz_bound(s.blocks[bname].mlp).value
             total += c2 * L
             notes.append(f"||C_{bname}||_2 = {c2:.4g} times L_d{bname} = {L:.4g}")
-        if ok:
-            how = How.EXACT if not apps else How.SOUND
-            note = ("affine policy: zero Hessian" if not apps else
-                    "policy affine in MLP blocks; " + "; ".join(notes)
-                    + " (layerwise product-rule bound, global)")
-            return Quantity(f"L_dpi_{which}", total * (1 + 1e-12) if apps else 0.0, how,
-                            "DRIP Assumption PolicyRegularity (b)", note)
+        return Quantity(f"L_dpi_{which}", total * (1 + 1e-12), How.SOUND,
+                        "DRIP Assumption PolicyRegularity (b)",
+                        "policy affine in MLP blocks; " + "; ".join(notes)
+                        + " (layerwise product-rule bound, global)")
+    if box is not None and not s.blocks:
+        from drip_cert.analysis.interval import UnsupportedExpression, enclose_expr
+
+        try:
+            acc = 0.0
+            for e in pol:
+                for xi in s.states:
+                    for xj in s.states:
+                        lo, hi = enclose_expr(sp.diff(e, xi, xj), list(s.states),
+                                              [tuple(b) for b in np.asarray(box, dtype=float)])
+                        acc += max(abs(lo), abs(hi)) ** 2
+            region = [[round(float(v), 4) for v in row] for row in np.asarray(box)]
+            return Quantity(f"L_dpi_{which}", float(np.sqrt(acc)) * (1 + 1e-12), How.SOUND,
+                            "DRIP Assumption PolicyRegularity (b)",
+                            f"interval enclosure of d^2 pi (Frobenius) on the box {region}: "
+                            "valid on that box only")
+        except UnsupportedExpression:
+            pass
     # sampled estimate of sup ||Hessian||_F on the support box enlarged by 1
     from drip_cert._jax import jax, jnp
 
@@ -286,8 +280,16 @@ def tasil_section(s: System, train: Demonstrations, heldout: Demonstrations | No
     """
     from drip_cert.bounds.tasil import tasil_certificate
 
-    L_il = jacobian_lipschitz(s, "learned")
-    L_ex = jacobian_lipschitz(s, "expert")
+    # the tube of assumption A2: the box around all expert states, enlarged by the tube radius
+    # (1 when no finite radius is set); region-limited bounds then cap R at that radius
+    margin = settings.tube_radius if math.isfinite(settings.tube_radius) else 1.0
+    pts = train.states.reshape(-1, s.n)
+    box = np.stack([pts.min(axis=0) - margin, pts.max(axis=0) + margin], axis=1)
+    L_il = jacobian_lipschitz(s, "learned", box)
+    L_ex = jacobian_lipschitz(s, "expert", box)
+    R = settings.tube_radius
+    if "box only" in L_il.note or "box only" in L_ex.note:
+        R = min(R, margin)
     L_Delta = L_il.value + L_ex.value
     h_train, how_t = trajectory_h(s, train, L_Delta, contraction_global)
     h_val, _ = (trajectory_h(s, heldout, L_Delta, contraction_global) if heldout is not None
@@ -297,7 +299,7 @@ def tasil_section(s: System, train: Demonstrations, heldout: Demonstrations | No
     tau = (TAU_MARGIN * max(h.h0 for h in h_train), TAU_MARGIN * max(h.h1 for h in h_train))
     cert = tasil_certificate(
         [h.h0 for h in h_train], [h.h1 for h in h_train], gamma0=gamma0.value, tau=tau,
-        L_Delta=L_Delta, delta=settings.delta, eta=settings.eta, R=settings.tube_radius,
+        L_Delta=L_Delta, delta=settings.delta, eta=settings.eta, R=R,
         heldout_h0=None if h_val is None else [h.h0 for h in h_val],
         heldout_h1=None if h_val is None else [h.h1 for h in h_val],
         method=method, continuous=True)
