@@ -350,14 +350,16 @@ def certify(spec: Spec, *, tasil: Any | None = None) -> Certificate:
         l1 = l1_section(s, spec.table("l1drac"), given, lam_q,
                         src.euclidean.region.startswith("all"), src.policy,
                         {q.name: q for q in ic.quantities()}, uc.values)
+        conditional = lam_q.how == How.ESTIMATE
         checks.append(Check(
             id="L1DRAC-design", holds=l1.feasible,
-            detail=("feasible design: " + ", ".join(
+            detail=(("conditional on the ESTIMATED rate lambda = " + f"{lam_q.value:.6g}: "
+                     if conditional else "") + ("feasible design: " + ", ".join(
                 f"{k} = {l1.design.to_dict()[k]:.6g}" for k in ("omega", "lambda_s", "Ts",
                                                                 "rho_r", "rho_a", "rho"))
                     if l1.feasible else "no feasible design: "
-                    + (l1.design.reason if l1.design is not None else l1.error)),
-            source="L1-DRAC (16), (21), (24)", how=How.EXACT))
+                    + (l1.design.reason if l1.design is not None else l1.error))),
+            source="L1-DRAC (16), (21), (24)", how=How.ESTIMATE if conditional else How.EXACT))
     return Certificate(system=s, assumptions=tuple(checks), inputs=ic, uncertainty=uc,
                        contraction_expert=ce, contraction_learned=cl, delta_iss=diss,
                        l1=l1, tasil=tasil, tasil_provenance=tasil_prov, notes=tuple(notes))
