@@ -44,7 +44,7 @@ def run_one(name: str, out: Path, quick: bool = False, seed: int = 0) -> dict:
                    horizon=horizon)
     small = validate(tp.system, cert, sim, paths=100, seed=seed, horizon=horizon)
     figs = reproduce_figure(big["_result"], small["_result"], cert, out,
-                            at_certified=big["at_certified_parameters"])
+                            at_certified=big["at_certified_parameters"], name=name)
     for f in figs:
         f.replace(out / f"{name}{f.suffix}")
     failing = [a.id for a in cert.assumptions if not a.holds]
