@@ -364,8 +364,3 @@ def certify(spec: Spec, *, tasil: Any | None = None) -> Certificate:
                        contraction_expert=ce, contraction_learned=cl, delta_iss=diss,
                        l1=l1, tasil=tasil, tasil_provenance=tasil_prov, notes=tuple(notes))
 
-
-def _fmt(x: float | None) -> str:
-    if x is None or (isinstance(x, float) and math.isnan(x)):
-        return "n/a"
-    return f"{x:.6g}"
