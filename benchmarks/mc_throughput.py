@@ -23,8 +23,9 @@ import numpy as np
 from drip_cert._jax import jax, jnp
 from drip_cert.control.l1drac import L1Params
 from drip_cert.learn.mlp import MLP, init_mlp
-from drip_cert.sim.engine import SimConfig, _normals, build_chunk_fn, simulate
+from drip_cert.sim.engine import SimConfig, build_chunk_fn, simulate
 from drip_cert.sim.model import SimModel, make_model
+from drip_cert.sim.noise import normals
 
 N = 4
 
@@ -99,6 +100,19 @@ def numpy_loop(h: MLP, pol: MLP, l1: L1Params, n_paths: int, n_steps: int, seed:
     return elapsed
 
 
+def _jax_normals(key, idx, j):
+    """The engine's normals through ``jax.extend.random.threefry_2x32`` (a rolled loop on CPU)."""
+    from jax.extend.random import threefry_2x32
+
+    b = idx.shape[0]
+    w0 = jnp.broadcast_to(idx[:, None], (b, N)).reshape(-1)
+    w1 = jnp.broadcast_to((j * N + jnp.arange(N, dtype=jnp.uint32))[None, :], (b, N)).reshape(-1)
+    out = threefry_2x32(key, jnp.concatenate([w0, w1]))
+    bits = (out[: b * N].astype(jnp.uint64) << jnp.uint64(32)) | out[b * N :].astype(jnp.uint64)
+    u = ((bits >> jnp.uint64(11)).astype(jnp.float64) + 0.5) * (2.0**-52) - 1.0
+    return (math.sqrt(2.0) * jax.scipy.special.erfinv(u)).reshape(b, N)
+
+
 def _profile(model: SimModel, h: MLP, pol: MLP, n_paths: int, n_steps: int) -> None:
     """ns per path-step of the main ingredients, each alone in a jitted time-major scan."""
     key = jax.random.PRNGKey(0)
@@ -120,7 +134,12 @@ def _profile(model: SimModel, h: MLP, pol: MLP, n_paths: int, n_steps: int) -> N
         return (time.perf_counter() - t0) / (n_paths * n_steps) * 1e9
 
     parts = {
-        "rng: engine (flat threefry + erfinv)": lambda x, j: x + 1e-3 * _normals(key, idx, j, N),
+        "rng: engine (unrolled threefry + erfinv)": lambda x, j: (
+            x + 1e-3 * normals(key, idx, j, N)
+        ),
+        "rng: jax threefry_2x32 primitive + erfinv": lambda x, j: (
+            x + 1e-3 * _jax_normals(key, idx, j)
+        ),
         "rng: vmapped fold_in + normal per path": lambda x, j: (
             x + 1e-3 * jax.vmap(lambda k: jax.random.normal(jax.random.fold_in(k, j), (N,)))(keys)
         ),

@@ -206,6 +206,25 @@ def test_chunk_size_invariance_bit_for_bit(base_result, model):
         _assert_bitwise(base_result, res)
 
 
+@pytest.mark.parametrize(
+    ("chunk_size", "workers"),
+    [
+        (32, 1),  # three chunks one after another
+        (90, 3),  # one chunk split into three concurrent sub-batches of 30
+        (45, 5),  # two chunks, each split in two sub-batches of 23 (the last one padded)
+    ],
+)
+def test_worker_count_invariance_bit_for_bit(base_result, model, chunk_size, workers):
+    cfg = dataclasses.replace(_CFG, chunk_size=chunk_size)
+    res = simulate(model, cfg, _x0, _x0_bar, progress=False, workers=workers)
+    _assert_bitwise(base_result, res)
+
+
+def test_workers_must_be_positive(model):
+    with pytest.raises(SpecError, match="workers"):
+        simulate(model, _CFG, _x0, _x0_bar, progress=False, workers=0)
+
+
 def test_seed_determinism(base_result, model):
     again = simulate(model, _CFG, _x0, _x0_bar, progress=False)
     _assert_bitwise(base_result, again)

@@ -23,11 +23,11 @@ Randomness. Path ``i`` draws its initial states from ``fold_in(k_x0, i)`` (and
 ``fold_in(k_x0bar, i)``), with ``k_* = fold_in(PRNGKey(seed), const)``. Component ``c`` of its
 standard normal increment at step ``j`` is ``sqrt(2) erfinv(u)``, ``u`` in (-1, 1) built from the
 64 bits of ``threefry2x32(k_bm; (i, j d + c))`` -- the counter-based hash behind ``jax.random``,
-called directly on flat arrays (:func:`_normals`) because a vmapped ``fold_in`` + ``normal`` per
-path and step cost four times as much. The numbers of a path depend only on the seed, its global
-index and the step, so the chunk size does not change them; the
-statistics are summed path by path in global order (:mod:`drip_cert.sim.stats`), so the chunk
-size does not change them either, bit for bit.
+unrolled so that XLA fuses it into the step (:mod:`drip_cert.sim.noise`); a vmapped
+``fold_in`` + ``normal`` per path and step costs more (the benchmark prints both). The numbers
+of a path depend only on the seed, its global index and the step, so neither the chunk size nor
+the number of concurrent workers changes them; the statistics are summed path by path in global
+order (:mod:`drip_cert.sim.stats`), so they do not change either, bit for bit.
 
 Divergence. After every step a path whose state is non-finite or whose norm exceeds
 ``divergence_cap`` is frozen at its last good state and gets a status code (``STATUS_NONFINITE``
@@ -51,7 +51,9 @@ import os
 import sys
 import tempfile
 import time
+from collections import deque
 from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -62,6 +64,7 @@ from drip_cert.control.l1drac import L1Params, L1State, l1_init, l1_step
 from drip_cert.errors import SpecError
 from drip_cert.sim import stats as _stats
 from drip_cert.sim.model import SimModel
+from drip_cert.sim.noise import normals
 
 __all__ = [
     "GAPS",
@@ -404,25 +407,6 @@ class SimResult:
 # the jitted chunk simulator
 
 
-def _normals(keypair, idx, j, d: int):
-    """Standard normals ``(B, d)`` for paths ``idx`` (uint32) at step ``j`` (uint32 scalar).
-
-    Counter-based: entry ``(b, c)`` hashes the pair ``(idx[b], j d + c)`` with threefry2x32 under
-    ``keypair``; the two output words give 64 bits, of which 53 make ``u`` uniform on the open
-    interval (-1, 1) and ``sqrt(2) erfinv(u)`` is the normal (the inverse-CDF map of
-    ``jax.random.normal``).
-    """
-    from jax.extend.random import threefry_2x32
-
-    b = idx.shape[0]
-    w0 = jnp.broadcast_to(idx[:, None], (b, d)).reshape(-1)
-    w1 = jnp.broadcast_to((j * jnp.uint32(d) + jnp.arange(d, dtype=jnp.uint32))[None, :], (b, d))
-    out = threefry_2x32(keypair, jnp.concatenate([w0, w1.reshape(-1)]))
-    bits = (out[: b * d].astype(jnp.uint64) << jnp.uint64(32)) | out[b * d :].astype(jnp.uint64)
-    u = ((bits >> jnp.uint64(11)).astype(jnp.float64) + 0.5) * (2.0**-52) - 1.0
-    return (math.sqrt(2.0) * jax.scipy.special.erfinv(u)).reshape(b, d)
-
-
 def build_chunk_fn(
     model: SimModel,
     config: SimConfig,
@@ -548,7 +532,7 @@ def _chunk_impl(key, idx, *, model, config, x0_sampler, x0_bar_sampler):
         new_xs, new_codes = [], []
         dw = None
         if true_scen:
-            dw = sqrt_dt * _normals(k_bm, idx, j, d)
+            dw = sqrt_dt * normals(k_bm, idx, j, d)
         for i, s in enumerate(scen):
             x = xs[i]
             if s == "expert_nominal":
@@ -784,6 +768,7 @@ def simulate(
     run_dir: str | Path | None = None,
     progress: bool | None = None,
     stop_after_chunks: int | None = None,
+    workers: int | None = None,
 ) -> SimResult:
     """Simulate the scenarios of ``config`` on ``model`` and return their statistics.
 
@@ -805,6 +790,13 @@ def simulate(
     stop_after_chunks
         Simulate at most this many NEW chunks in this call (the result is then marked
         incomplete unless all chunks are done).
+    workers
+        Compiled calls run at once from a thread pool (``None``: the usable CPU cores on the CPU
+        backend, 1 on an accelerator). XLA parallelises each matrix product but runs the
+        elementwise loops of a step on one core; concurrent calls keep every core busy
+        (``benchmarks/mc_throughput.py`` measures the gain). Fewer chunks than workers are split
+        into equal sub-batches. Results do not depend on ``workers``, bit for bit: the noise of
+        a path is a function of its global index, and chunks are absorbed in order.
 
     Returns
     -------
@@ -856,27 +848,70 @@ def simulate(
     compile_s = 0.0
     t_run = 0.0
     if todo:
+        n_workers = _default_workers() if workers is None else int(workers)
+        if n_workers < 1:
+            raise SpecError(f"workers must be >= 1, got {workers!r}", field="workers")
+        # memory: at most _MAX_CHUNK_BYTES of records in flight
+        n_workers = max(1, min(n_workers, _MAX_CHUNK_BYTES // max(rec_bytes, 1)))
+        parts = max(1, min(n_workers // len(todo), cfg.chunk_size))
+        sub = -(-cfg.chunk_size // parts)  # paths per call; the last part is padded
         fn = build_chunk_fn(model, cfg, x0_sampler, x0_bar_sampler)
         t0 = time.perf_counter()
         compiled = fn.func.lower(
-            *fn.args, jax.ShapeDtypeStruct((cfg.chunk_size,), jnp.uint32), **fn.keywords
+            *fn.args, jax.ShapeDtypeStruct((sub,), jnp.uint32), **fn.keywords
         ).compile()
         compile_s = time.perf_counter() - t0
         show = progress if progress is not None else sys.stderr.isatty()
         from tqdm.auto import tqdm
 
+        def run_part(idx):
+            # blocks in the worker thread, so concurrent calls really execute concurrently
+            return jax.block_until_ready(compiled(*fn.args, idx))
+
+        def submit(c: int):
+            idx = np.arange(c * cfg.chunk_size, (c + 1) * cfg.chunk_size, dtype=np.uint32)
+            padded = np.concatenate([idx, np.full(parts * sub - idx.size, idx[-1], np.uint32)])
+            futs = [
+                pool.submit(run_part, jnp.asarray(padded[q * sub : (q + 1) * sub]))
+                for q in range(parts)
+            ]
+            return idx, futs
+
+        def finish(st: _RunState, job) -> _RunState:
+            idx, futs = job
+            outs = [jax.device_get(f.result()) for f in futs]
+            recs = np.concatenate([o[0] for o in outs], axis=2)[:, :, : idx.size]
+            codes = np.concatenate([o[1] for o in outs], axis=1)[:, : idx.size]
+            st = _absorb(st, cfg, idx.astype(np.int64), recs, codes)
+            if rdir is not None:
+                _atomic_savez(rdir / _STATE_FILE, _state_arrays(st))
+            bar.update(1)
+            return st
+
         bar = tqdm(total=cfg.n_chunks, initial=state.chunks_done, disable=not show, unit="chunk")
         t1 = time.perf_counter()
-        for c in todo:
-            idx = np.arange(c * cfg.chunk_size, (c + 1) * cfg.chunk_size, dtype=np.uint32)
-            recs, codes = compiled(*fn.args, jnp.asarray(idx))
-            state = _absorb(state, cfg, idx.astype(np.int64), recs, codes)
-            if rdir is not None:
-                _atomic_savez(rdir / _STATE_FILE, _state_arrays(state))
-            bar.update(1)
+        in_flight = max(1, n_workers // parts)  # chunks computing while the oldest is absorbed
+        with ThreadPoolExecutor(max_workers=n_workers) as pool:
+            pending: deque = deque()
+            for c in todo:
+                pending.append(submit(c))
+                if len(pending) >= in_flight:
+                    state = finish(state, pending.popleft())
+            while pending:
+                state = finish(state, pending.popleft())
         bar.close()
         t_run = time.perf_counter() - t1
     return _result(model, cfg, h, state, compile_s, t_run)
+
+
+def _default_workers() -> int:
+    """Usable CPU cores on the CPU backend, else 1."""
+    if jax.default_backend() != "cpu":
+        return 1
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # not on Linux
+        return max(1, os.cpu_count() or 1)
 
 
 def _result(model, cfg: SimConfig, h: str, state: _RunState, compile_s, run_s) -> SimResult:

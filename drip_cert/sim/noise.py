@@ -1,0 +1,79 @@
+"""Counter-based Gaussian noise of the engine: ``threefry2x32`` unrolled, then the inverse CDF.
+
+Each standard normal of a run is a pure function of the seed, the path's global index ``i``,
+the step ``j`` and the component ``c``: the 64 output bits of ``threefry2x32(k; (i, j d + c))``
+(Salmon et al., "Parallel random numbers: as easy as 1, 2, 3", SC 2011; 20 rounds, the hash
+behind ``jax.random``) give a uniform ``u`` on the open interval (-1, 1) with 53 random bits,
+and ``z = sqrt(2) erfinv(u)`` (the map ``jax.random.normal`` uses). Nothing depends on how the
+paths are grouped into chunks, so chunk size and thread count cannot change a number.
+
+Why not ``jax.extend.random.threefry_2x32``: on the CPU, JAX lowers that primitive with a rolled
+``fori_loop`` over the five 4-round blocks, which XLA cannot fuse with the surrounding step; in
+the engine's time loop it cost 21 ns per path-step for four normals. :func:`threefry2x32` below
+is the same function written as straight-line ``jnp`` code (20 rounds, key injection every 4
+rounds, the Skein rotation constants), which XLA fuses into one loop: 5 ns per path-step, and
+bit-for-bit the same words (``tests/test_noise.py`` compares them with JAX's on random keys and
+counters).
+"""
+
+from __future__ import annotations
+
+import math
+
+from drip_cert._jax import jax, jnp
+
+__all__ = ["normals", "threefry2x32"]
+
+# Threefry-2x32 rotation constants (Random123 / Skein), used for rounds 0-3, 4-7, 8-11, ...
+_ROTATIONS = ((13, 15, 26, 6), (17, 29, 16, 24))
+_PARITY = 0x1BD11BDA  # Skein key-schedule parity constant
+
+
+def _rotl(v, r: int):
+    return (v << jnp.uint32(r)) | (v >> jnp.uint32(32 - r))
+
+
+def threefry2x32(key1, key2, x0, x1):
+    """Threefry-2x32 with 20 rounds: ``(key1, key2)`` hash the counter pair ``(x0, x1)``.
+
+    Parameters
+    ----------
+    key1, key2
+        uint32 scalars (the two words of a ``jax.random.PRNGKey``).
+    x0, x1
+        uint32 arrays of one shape (the counter words).
+
+    Returns
+    -------
+    tuple of two uint32 arrays
+        The two output words; identical to the halves of
+        ``jax.extend.random.threefry_2x32((key1, key2), concatenate([x0, x1]))``.
+    """
+    ks = (key1, key2, key1 ^ key2 ^ jnp.uint32(_PARITY))
+    x0 = x0 + ks[0]
+    x1 = x1 + ks[1]
+    for block in range(5):
+        for r in _ROTATIONS[block % 2]:
+            x0 = x0 + x1
+            x1 = _rotl(x1, r) ^ x0
+        x0 = x0 + ks[(block + 1) % 3]
+        x1 = x1 + ks[(block + 2) % 3] + jnp.uint32(block + 1)
+    return x0, x1
+
+
+def normals(keypair, idx, j, d: int):
+    """Standard normals ``(B, d)`` for paths ``idx`` (uint32, ``(B,)``) at step ``j`` (uint32).
+
+    Entry ``(b, c)`` hashes the counter pair ``(idx[b], j d + c)`` under ``keypair``; the high 53
+    of the 64 output bits (first word high) give ``u = (k + 1/2) 2^-52 - 1`` on the open interval
+    (-1, 1), and the normal is ``sqrt(2) erfinv(u)``. The smallest ``|u|`` away from the
+    endpoints is ``1 - 2^-53``, so the largest normal is about 8.3: tails are exact to
+    ``P(|Z| > 8.3) ~ 1e-16``.
+    """
+    b = idx.shape[0]
+    w0 = jnp.broadcast_to(idx[:, None], (b, d))
+    w1 = jnp.broadcast_to((j * jnp.uint32(d) + jnp.arange(d, dtype=jnp.uint32))[None, :], (b, d))
+    hi, lo = threefry2x32(keypair[0], keypair[1], w0, w1)
+    bits = (hi.astype(jnp.uint64) << jnp.uint64(32)) | lo.astype(jnp.uint64)
+    u = ((bits >> jnp.uint64(11)).astype(jnp.float64) + 0.5) * (2.0**-52) - 1.0
+    return math.sqrt(2.0) * jax.scipy.special.erfinv(u)
