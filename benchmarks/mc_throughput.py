@@ -15,6 +15,7 @@ The last line printed is ``engine X steps/s, numpy Y steps/s, ratio Zx``.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import math
 import time
 
@@ -23,32 +24,41 @@ import numpy as np
 from drip_cert._jax import jax, jnp
 from drip_cert.control.l1drac import L1Params
 from drip_cert.learn.mlp import MLP, init_mlp
-from drip_cert.sim.engine import SimConfig, build_chunk_fn, simulate
+from drip_cert.sim.engine import SCENARIOS, SimConfig, _default_workers, simulate
 from drip_cert.sim.model import SimModel, make_model
 from drip_cert.sim.noise import normals
 
 N = 4
 
 
-def build_system(seed: int = 0) -> tuple[SimModel, MLP, MLP]:
-    """The benchmark system and its two seeded MLPs (h and the learned policy)."""
+def build_system(
+    seed: int = 0, *, with_h: bool = True, with_policy: bool = True, with_uncertainty: bool = True
+) -> tuple[SimModel, MLP, MLP]:
+    """The benchmark system and its two seeded MLPs (h and the learned policy).
+
+    The ``with_*`` switches remove one ingredient for the ablation profile: ``h`` becomes 0,
+    the policy becomes the linear ``-0.2 x``, the uncertainty becomes ``Lambda_mu = 0``,
+    ``Lambda_sigma = 0.1 I`` (the noise is still drawn).
+    """
     rng = np.random.default_rng(seed)
     h = init_mlp([N, 32, N], rng)
     pol = init_mlp([N, 64, 64, N], rng)
 
     def f(t, x):
-        return -0.05 * x - 0.25 * h.apply_jax(x)
+        return -0.05 * x - 0.25 * h.apply_jax(x) if with_h else -0.05 * x
 
     def expert(x):
         return -0.2 * x + h.apply_jax(x)
 
     def learned(x):
-        return pol.apply_jax(x)
+        return pol.apply_jax(x) if with_policy else -0.2 * x
 
     def lam_mu(t, x):
         return (0.1 + 0.05 * jnp.sqrt(jnp.sum(x * x))) * jnp.ones(N)
 
     def lam_sigma(t, x):
+        if not with_uncertainty:
+            return 0.1 * jnp.eye(N)
         return (0.1 + 0.05 * jnp.sqrt(jnp.sqrt(jnp.sum(x * x)))) * jnp.eye(N)
 
     model = make_model(
@@ -59,7 +69,7 @@ def build_system(seed: int = 0) -> tuple[SimModel, MLP, MLP]:
         0.25 * np.eye(N),
         expert,
         learned,
-        lam_mu=lam_mu,
+        lam_mu=lam_mu if with_uncertainty else None,
         lam_sigma=lam_sigma,
         name="paper-4d-benchmark",
     )
@@ -113,12 +123,35 @@ def _jax_normals(key, idx, j):
     return (math.sqrt(2.0) * jax.scipy.special.erfinv(u)).reshape(b, N)
 
 
-def _profile(model: SimModel, h: MLP, pol: MLP, n_paths: int, n_steps: int) -> None:
-    """ns per path-step of the main ingredients, each alone in a jitted time-major scan."""
+def _ablation(cfg: SimConfig) -> None:
+    """ns per path-step of the engine (all workers) with one ingredient removed at a time."""
+    variants = {
+        "whole step": {},
+        "without h (f = -0.05 x)": {"with_h": False},
+        "policy MLP -> linear": {"with_policy": False},
+        "without uncertainty terms": {"with_uncertainty": False},
+        "all three removed (noise, L1, Euler)": {
+            "with_h": False,
+            "with_policy": False,
+            "with_uncertainty": False,
+        },
+    }
+    for name, kw in variants.items():
+        m, _, _ = build_system(0, **kw)
+        r = simulate(m, cfg, x0_sampler, progress=False)
+        ns = r.run_s / (cfg.n_paths * cfg.n_steps) * 1e9
+        print(f"  ablation: {name:38s} {ns:7.1f} ns/path-step")
+
+
+def _micro(pol: MLP, n_paths: int, n_steps: int) -> None:
+    """ns per path-step of single ingredients, each alone in one jitted time-major scan."""
     key = jax.random.PRNGKey(0)
     idx = jnp.arange(n_paths, dtype=jnp.uint32)
     keys = jax.vmap(lambda i: jax.random.fold_in(key, i))(idx)
     x0 = jax.random.uniform(key, (n_paths, N))
+    rng = np.random.default_rng(1)
+    w64 = jnp.asarray(rng.normal(size=(64, 64)) / 8.0)
+    linear_pol = dataclasses.replace(pol, activation="identity")
 
     def loop(body):
         def run(x):
@@ -134,28 +167,21 @@ def _profile(model: SimModel, h: MLP, pol: MLP, n_paths: int, n_steps: int) -> N
         return (time.perf_counter() - t0) / (n_paths * n_steps) * 1e9
 
     parts = {
-        "rng: engine (unrolled threefry + erfinv)": lambda x, j: (
-            x + 1e-3 * normals(key, idx, j, N)
-        ),
+        "rng: engine (unrolled threefry + erfinv)": lambda x, j: x + 1e-3 * normals(key, idx, j, N),
         "rng: jax threefry_2x32 primitive + erfinv": lambda x, j: (
             x + 1e-3 * _jax_normals(key, idx, j)
         ),
         "rng: vmapped fold_in + normal per path": lambda x, j: (
             x + 1e-3 * jax.vmap(lambda k: jax.random.normal(jax.random.fold_in(k, j), (N,)))(keys)
         ),
-        "policy MLP 4-64-64-4": lambda x, j: x + 1e-3 * jax.vmap(pol.apply_jax)(x),
-        "h MLP 4-32-4": lambda x, j: x + 1e-3 * jax.vmap(h.apply_jax)(x),
-        "uncertainty (Lambda_mu, Lambda_sigma)": lambda x, j: (
-            x
-            + 1e-3
-            * (
-                jax.vmap(model.lam_mu, in_axes=(None, 0))(0.0, x)
-                + jnp.einsum("bnd,bd->bn", jax.vmap(model.lam_sigma, in_axes=(None, 0))(0.0, x), x)
-            )
+        "dense 64x64 product alone (float64)": lambda x, j: (
+            x + 1e-3 * (jnp.tile(x, (1, 16)) @ w64)[:, :N]
         ),
+        "policy MLP 4-64-64-4 alone": lambda x, j: x + 1e-3 * pol.apply_jax(x),
+        "policy MLP, tanh -> identity": lambda x, j: x + 1e-3 * linear_pol.apply_jax(x),
     }
     for name, body in parts.items():
-        print(f"  profile: {name:40s} {loop(body):7.1f} ns/path-step")
+        print(f"  micro: {name:43s} {loop(body):7.1f} ns/path-step")
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -188,17 +214,19 @@ def main(argv: list[str] | None = None) -> int:
     print(f"system {model.name}: {n_paths} paths, T={T}, dt={dt}, {n_steps} steps")
     res = simulate(model, cfg, x0_sampler, progress=False)
     eng = n_paths * n_steps / res.run_s
-    print(f"  engine: compile {res.compile_s:.2f} s, run {res.run_s:.2f} s -> {eng:.3g} steps/s")
-    if args.all_scenarios:
-        cfg4 = SimConfig(
-            T=T,
-            dt=dt,
-            n_paths=n_paths,
-            chunk_size=args.chunk or n_paths,
-            l1=l1,
-            record_every=rec,
-            n_sample_paths=0,
+    workers = _default_workers()
+    print(
+        f"  engine ({workers} workers): compile {res.compile_s:.2f} s, run {res.run_s:.2f} s "
+        f"-> {eng:.3g} steps/s"
+    )
+    if not args.no_profile:
+        r1 = simulate(model, cfg, x0_sampler, progress=False, workers=1)
+        print(
+            f"  engine (1 worker, XLA's intra-op threads only): run {r1.run_s:.2f} s "
+            f"-> {n_paths * n_steps / r1.run_s:.3g} steps/s"
         )
+    if args.all_scenarios:
+        cfg4 = dataclasses.replace(cfg, scenarios=SCENARIOS)
         r4 = simulate(model, cfg4, x0_sampler, progress=False)
         print(
             f"  engine, all 4 scenarios in one pass: compile {r4.compile_s:.2f} s, run "
@@ -206,18 +234,8 @@ def main(argv: list[str] | None = None) -> int:
             f"({4 * n_paths * n_steps / r4.run_s:.3g} trajectory-steps/s)"
         )
     if not args.no_profile:
-        # the raw chunk function without statistics, then the ingredients alone
-        fn = build_chunk_fn(model, cfg, x0_sampler)
-        idx = jnp.arange(n_paths, dtype=jnp.uint32)
-        jax.block_until_ready(fn(idx))
-        t0 = time.perf_counter()
-        jax.block_until_ready(fn(idx))
-        raw = time.perf_counter() - t0
-        print(
-            f"  profile: whole L1 step (no statistics)            "
-            f"{raw / (n_paths * n_steps) * 1e9:7.1f} ns/path-step"
-        )
-        _profile(model, h, pol, n_paths, min(n_steps, 500))
+        _ablation(cfg)
+        _micro(pol, n_paths, min(n_steps, 500))
     t_np = numpy_loop(h, pol, l1, n_paths, n_steps, seed=0)
     npr = n_paths * n_steps / t_np
     print(f"  numpy loop: {t_np:.2f} s")

@@ -26,6 +26,7 @@ import numpy as np
 from drip_cert.errors import SpecError
 
 ACTIVATIONS = ("tanh", "gelu", "identity")
+_NARROW_INPUT = 8  # MLP.apply_jax writes a first layer this narrow as broadcast products
 
 
 @dataclass(frozen=True)
@@ -108,11 +109,26 @@ class MLP:
         )
 
     def apply_jax(self, x):
-        """Evaluate with jax.numpy on ``x`` of shape ``(..., in_dim)`` (traceable)."""
+        """Evaluate with jax.numpy on ``x`` of shape ``(..., in_dim)`` (traceable).
+
+        With ``in_dim <= 8`` and a hidden layer, the first layer is written as ``in_dim``
+        broadcast multiply-adds instead of a matrix product: XLA's CPU backend runs a product
+        with such a short inner dimension far below its FMA throughput, while the broadcast form
+        fuses with the bias and the activation. Same value up to summation order; the
+        Monte-Carlo benchmark measured ~10 ns less per path-step (of ~230) on the 4-64-64-4
+        policy. Training differentiates :func:`apply_params`, which keeps the product.
+        """
         from drip_cert._jax import jnp
 
         params = [(jnp.asarray(w), jnp.asarray(b)) for w, b in self.params()]
-        return apply_params(params, x, self.activation, self.output_activation, xp=jnp)
+        w0, b0 = params[0]
+        if w0.shape[1] > _NARROW_INPUT or len(params) == 1:
+            return apply_params(params, x, self.activation, self.output_activation, xp=jnp)
+        h = b0 + x[..., 0:1] * w0[:, 0]
+        for i in range(1, w0.shape[1]):
+            h = h + x[..., i : i + 1] * w0[:, i]
+        h = activation_fn(self.activation, jnp)(h)
+        return apply_params(params[1:], h, self.activation, self.output_activation, xp=jnp)
 
     def save(self, path: str | Path) -> None:
         """Write ``path`` (.npz) and the metadata ``path.with_suffix('.json')`` atomically."""
