@@ -17,6 +17,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import math
+import resource
 import time
 
 import numpy as np
@@ -219,6 +220,8 @@ def main(argv: list[str] | None = None) -> int:
         f"  engine ({workers} workers): compile {res.compile_s:.2f} s, run {res.run_s:.2f} s "
         f"-> {eng:.3g} steps/s"
     )
+    rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024  # Linux: KiB
+    print(f"  peak resident memory after the engine: {rss:.0f} MiB (chunks of {cfg.chunk_size})")
     if not args.no_profile:
         r1 = simulate(model, cfg, x0_sampler, progress=False, workers=1)
         print(
