@@ -31,9 +31,11 @@ def cmd_check_spec(args: argparse.Namespace) -> int:
     if args.json:
         _print_json({"ok": True, "system": s.to_dict()})
     else:
-        print(f"{args.spec}: OK — system '{s.name}', n = {s.n}, m = {s.m}, d = {s.d}, "
-              f"T = {s.horizon:g}, blocks: {', '.join(s.blocks) or 'none'}, learned policy: "
-              f"{'yes' if s.learned is not None else 'no'}")
+        print(
+            f"{args.spec}: OK — system '{s.name}', n = {s.n}, m = {s.m}, d = {s.d}, "
+            f"T = {s.horizon:g}, blocks: {', '.join(s.blocks) or 'none'}, learned policy: "
+            f"{'yes' if s.learned is not None else 'no'}"
+        )
     return 0
 
 
@@ -67,23 +69,37 @@ def cmd_design_l1(args: argparse.Namespace) -> int:
 def cmd_train(args: argparse.Namespace) -> int:
     from drip_cert.workflows import train_from_spec
 
-    summary = train_from_spec(args.spec, method=args.method, trajectories=args.trajectories,
-                              seed=args.seed, out=args.out, steps=args.steps,
-                              progress=not args.json)
+    summary = train_from_spec(
+        args.spec,
+        method=args.method,
+        trajectories=args.trajectories,
+        seed=args.seed,
+        out=args.out,
+        steps=args.steps,
+        progress=not args.json,
+    )
     if args.json:
         _print_json(summary)
     else:
-        print(f"trained {summary['method']} policy in {summary['wall_s']:.1f} s; "
-              f"held-out gap {summary['heldout_gap_mean']:.4g} (mean), written to {args.out}")
+        print(
+            f"trained {summary['method']} policy in {summary['wall_s']:.1f} s; "
+            f"held-out gap {summary['heldout_gap_mean']:.4g} (mean), written to {args.out}"
+        )
     return 0
 
 
 def cmd_validate(args: argparse.Namespace) -> int:
     from drip_cert.validate import validate_spec
 
-    report = validate_spec(args.spec, trajectories=args.trajectories, seed=args.seed,
-                           out=args.out, practical_ts=args.practical_ts, quick=args.quick,
-                           progress=not args.json)
+    report = validate_spec(
+        args.spec,
+        trajectories=args.trajectories,
+        seed=args.seed,
+        out=args.out,
+        practical_ts=args.practical_ts,
+        quick=args.quick,
+        progress=not args.json,
+    )
     if args.json:
         _print_json(report)
     else:
@@ -96,8 +112,9 @@ def cmd_validate(args: argparse.Namespace) -> int:
 def cmd_reproduce(args: argparse.Namespace) -> int:
     from drip_cert.workflows import reproduce
 
-    report = reproduce(args.name, out=args.out, quick=args.quick, seed=args.seed,
-                       progress=not args.json)
+    report = reproduce(
+        args.name, out=args.out, quick=args.quick, seed=args.seed, progress=not args.json
+    )
     if args.json:
         _print_json(report)
     else:
@@ -143,8 +160,12 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("--trajectories", type=_posint, default=1000)
     q.add_argument("--seed", type=int, default=0)
     q.add_argument("--out", default=None)
-    q.add_argument("--practical-ts", type=float, default=None,
-                   help="simulate at this T_s when the certified one is impractically small")
+    q.add_argument(
+        "--practical-ts",
+        type=float,
+        default=None,
+        help="simulate at this T_s when the certified one is impractically small",
+    )
     q.add_argument("--quick", action="store_true")
     q.add_argument("--json", action="store_true")
     q.set_defaults(func=cmd_validate)

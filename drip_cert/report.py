@@ -28,45 +28,77 @@ def certificate_markdown(cert: Any) -> str:
     lines.append(f"**{verdict}** (n = {s['n']}, m = {s['m']}, d = {s['d']}, T = {s['horizon']:g})")
     if d["estimated_constants"]:
         lines.append("")
-        lines.append("Constants that are sampled **estimates**, not bounds: "
-                     + ", ".join(d["estimated_constants"])
-                     + ". Give sound values in the spec's `[constants]` table to remove them.")
-    lines += ["", "## Assumptions", "", "| id | holds | margin | how | detail |",
-              "|---|---|---|---|---|"]
+        lines.append(
+            "Constants that are sampled **estimates**, not bounds: "
+            + ", ".join(d["estimated_constants"])
+            + ". Give sound values in the spec's `[constants]` table to remove them."
+        )
+    lines += [
+        "",
+        "## Assumptions",
+        "",
+        "| id | holds | margin | how | detail |",
+        "|---|---|---|---|---|",
+    ]
     for a in d["assumptions"]:
-        lines.append(f"| {a['id']} | {_f(a['holds'])} | {_f(a['margin'])} | {a['how']} | "
-                     f"{a['detail']} |")
-    lines += ["", "## Constants", "", "| constant | value | how | source | note |",
-              "|---|---|---|---|---|"]
+        lines.append(
+            f"| {a['id']} | {_f(a['holds'])} | {_f(a['margin'])} | {a['how']} | {a['detail']} |"
+        )
+    lines += [
+        "",
+        "## Constants",
+        "",
+        "| constant | value | how | source | note |",
+        "|---|---|---|---|---|",
+    ]
     for name, q in d["constants"].items():
         lines.append(f"| {name} | {_f(q['value'])} | {q['how']} | {q['source']} | {q['note']} |")
     c = d["contraction"]
-    lines += ["", "## Contraction (DRIP Assumption 2)", "",
-              f"Euclidean rate lambda = {_f(c['rate'])} ({c['how']}, {c['method']}) on "
-              f"{c['region']}; metric rate {_f(c['metric_rate'])}."]
+    lines += [
+        "",
+        "## Contraction (DRIP Assumption 2)",
+        "",
+        f"Euclidean rate lambda = {_f(c['rate'])} ({c['how']}, {c['method']}) on "
+        f"{c['region']}; metric rate {_f(c['metric_rate'])}.",
+    ]
     if c["learned"] is not None:
-        lines.append(f"Learned closed loop: lambda = {_f(c['learned']['rate'])} "
-                     f"({c['learned']['how']}, {c['learned']['method']}).")
+        lines.append(
+            f"Learned closed loop: lambda = {_f(c['learned']['rate'])} "
+            f"({c['learned']['how']}, {c['learned']['method']})."
+        )
     if d["delta_iss"] is not None:
         di = d["delta_iss"]
-        lines += ["", "## delta-ISS gain (DRIP Proposition 1)", "",
-                  f"gain used downstream {_f(di['gain'])} ({di['used']}); the paper's gain at the "
-                  f"best theta = {_f(di['theta_star'])} is {_f(di['gain_paper'])}."]
+        lines += [
+            "",
+            "## delta-ISS gain (DRIP Proposition 1)",
+            "",
+            f"gain used downstream {_f(di['gain'])} ({di['used']}); the paper's gain at the "
+            f"best theta = {_f(di['theta_star'])} is {_f(di['gain_paper'])}.",
+        ]
     if d.get("tasil"):
         t = d["tasil"]
-        lines += ["", "## TaSIL (policy-induced imitation gap)", "",
-                  f"h0 = {_f(t.get('h0'))}, h1 = {_f(t.get('h1'))}, gamma0 = "
-                  f"{_f(t.get('gamma0'))}, L_Delta = {_f(t.get('L_Delta'))}, deterministic gap "
-                  f"bound {_f(t.get('gap_bound'))}, rho_TaSIL = {_f(t.get('rho'))} "
-                  f"(delta = {_f(t.get('delta'))}, n = {t.get('n')}); vacuous or failing "
-                  f"forms: {', '.join(t.get('vacuous_forms') or []) or 'none'}.",
-                  "", f"_{t.get('label', '')}_"]
+        lines += [
+            "",
+            "## TaSIL (policy-induced imitation gap)",
+            "",
+            f"h0 = {_f(t.get('h0'))}, h1 = {_f(t.get('h1'))}, gamma0 = "
+            f"{_f(t.get('gamma0'))}, L_Delta = {_f(t.get('L_Delta'))}, deterministic gap "
+            f"bound {_f(t.get('gap_bound'))}, rho_TaSIL = {_f(t.get('rho'))} "
+            f"(delta = {_f(t.get('delta'))}, n = {t.get('n')}); vacuous or failing "
+            f"forms: {', '.join(t.get('vacuous_forms') or []) or 'none'}.",
+            "",
+            f"_{t.get('label', '')}_",
+        ]
     if d.get("l1drac"):
         lines += ["", "## L1-DRAC design", "", l1_design_text(d["l1drac"])]
     r = d["rho"]
-    lines += ["", "## Total", "",
-              f"rho_TaSIL = {_f(r['rho_tasil'])}, rho_L1 = {_f(r['rho_l1'])}, "
-              f"rho = {_f(r['rho_total'])} ({r['source']})"]
+    lines += [
+        "",
+        "## Total",
+        "",
+        f"rho_TaSIL = {_f(r['rho_tasil'])}, rho_L1 = {_f(r['rho_l1'])}, "
+        f"rho = {_f(r['rho_total'])} ({r['source']})",
+    ]
     if d["notes"]:
         lines += ["", "## Notes", ""] + [f"* {n}" for n in d["notes"]]
     return "\n".join(lines) + "\n"
@@ -85,8 +117,10 @@ def l1_design_text(rep: dict[str, Any]) -> str:
         "|---|---|---|---|---|",
     ]
     for c in rep.get("conditions", []):
-        lines.append(f"| ({c['eq']}) | {_f(c['lhs'])} | {_f(c['rhs'])} | {_f(c['margin'])} | "
-                     f"{_f(c['holds'])} |")
+        lines.append(
+            f"| ({c['eq']}) | {_f(c['lhs'])} | {_f(c['rhs'])} | {_f(c['margin'])} | "
+            f"{_f(c['holds'])} |"
+        )
     if rep.get("reason"):
         lines += ["", f"reason: {rep['reason']}"]
     return "\n".join(lines)
@@ -94,14 +128,18 @@ def l1_design_text(rep: dict[str, Any]) -> str:
 
 def validation_text(rep: dict[str, Any]) -> str:
     """Text rendering of a validation report."""
-    lines = [f"validation: {'HOLDS' if rep.get('holds') else 'VIOLATED'}"
-             + ("" if rep.get("at_certified_parameters", True)
-                else " (NOT at certified parameters)"),
-             "", "| check | bound | empirical | ci_high | ratio | holds |",
-             "|---|---|---|---|---|---|"]
+    lines = [
+        f"validation: {'HOLDS' if rep.get('holds') else 'VIOLATED'}"
+        + ("" if rep.get("at_certified_parameters", True) else " (NOT at certified parameters)"),
+        "",
+        "| check | bound | empirical | ci_high | ratio | holds |",
+        "|---|---|---|---|---|---|",
+    ]
     for c in rep.get("checks", []):
-        lines.append(f"| {c['name']} | {_f(c['bound'])} | {_f(c['empirical'])} | "
-                     f"{_f(c['ci_high'])} | {_f(c['ratio'])} | {_f(c['holds'])} |")
+        lines.append(
+            f"| {c['name']} | {_f(c['bound'])} | {_f(c['empirical'])} | "
+            f"{_f(c['ci_high'])} | {_f(c['ratio'])} | {_f(c['holds'])} |"
+        )
     for note in rep.get("notes", []):
         lines.append(f"* {note}")
     return "\n".join(lines)
@@ -161,8 +199,9 @@ def atomic_write_json(path: Any, obj: Any) -> None:
     atomic_write_text(path, json.dumps(jsonable(obj), indent=2, allow_nan=False) + "\n")
 
 
-def reproduce_figure(res: Any, res_paper: Any, cert: Any, out: Any,
-                     at_certified: bool, name: str | None = None) -> list[Any]:
+def reproduce_figure(
+    res: Any, res_paper: Any, cert: Any, out: Any, at_certified: bool, name: str | None = None
+) -> list[Any]:
     """The total imitation gap against time for the paper's three cases (PNG and SVG).
 
     Mean over paths with the t-interval band of the large ensemble, the paper-size ensemble as
@@ -177,27 +216,42 @@ def reproduce_figure(res: Any, res_paper: Any, cert: Any, out: Any,
 
     out = Path(out)
     fig, ax = plt.subplots(figsize=(7.5, 4.5))
-    cases = (("policy", "(i) TaSIL, nominal system", "tab:green"),
-             ("total_true", "(ii) TaSIL, uncertain system", "tab:red"),
-             ("total_l1", "(iii) TaSIL + L1-DRAC, uncertain system", "tab:blue"))
+    cases = (
+        ("policy", "(i) TaSIL, nominal system", "tab:green"),
+        ("total_true", "(ii) TaSIL, uncertain system", "tab:red"),
+        ("total_l1", "(iii) TaSIL + L1-DRAC, uncertain system", "tab:blue"),
+    )
     for gap, label, color in cases:
         g = res.gap(gap)
         ax.plot(g.times, g.mean, color=color, lw=2, label=f"{label} ({g.n} paths)")
         ax.fill_between(g.times, g.ci_low, g.ci_high, color=color, alpha=0.25, lw=0)
         gp = res_paper.gap(gap)
-        ax.plot(gp.times, gp.mean, color=color, lw=0.8, ls="--",
-                label=f"{label.split(' ')[0]} {gp.n} paths (paper's ensemble)")
+        ax.plot(
+            gp.times,
+            gp.mean,
+            color=color,
+            lw=0.8,
+            ls="--",
+            label=f"{label.split(' ')[0]} {gp.n} paths (paper's ensemble)",
+        )
     if cert.rho_tasil is not None and math.isfinite(cert.rho_tasil):
         ax.axhline(cert.rho_tasil, color="tab:green", ls=":", label="rho_TaSIL (certified)")
     if at_certified and cert.rho is not None and math.isfinite(cert.rho):
         ax.axhline(cert.rho, color="tab:blue", ls=":", label="rho = rho_TaSIL + rho_L1")
     elif at_certified and cert.rho_l1 is not None and math.isfinite(cert.rho_l1):
-        ax.axhline(cert.rho_l1, color="tab:blue", ls=":",
-                   label="rho_L1 (certified bound on E||X_t - x'_t||; rho_TaSIL vacuous)")
+        ax.axhline(
+            cert.rho_l1,
+            color="tab:blue",
+            ls=":",
+            label="rho_L1 (certified bound on E||X_t - x'_t||; rho_TaSIL vacuous)",
+        )
     title = "Total imitation gap E||X_t - x*_t|| (band: 95% t interval)"
     if name:
-        verdict = "certified" if cert.certified else "not certified: " + ", ".join(
-            c.id for c in cert.assumptions if not c.holds)
+        verdict = (
+            "certified"
+            if cert.certified
+            else "not certified: " + ", ".join(c.id for c in cert.assumptions if not c.holds)
+        )
         title = f"{name} ({verdict})\n" + title
     if not at_certified:
         title += "\nL1-DRAC at practical parameters (certified T_s is not simulable)"
@@ -220,20 +274,35 @@ def reproduce_figure(res: Any, res_paper: Any, cert: Any, out: Any,
 
 def reproduce_markdown(summary: dict[str, Any], cert: Any, runs: dict[str, Any]) -> str:
     """``report.md`` of ``drip-cert reproduce paper-4d``."""
-    lines = ["# DRIP paper, Section \"Numerical Experiments\", reproduced by drip-cert", ""]
+    lines = ['# DRIP paper, Section "Numerical Experiments", reproduced by drip-cert', ""]
     st = summary["settings"]
-    lines.append(f"Settings: {'quick' if summary['quick'] else 'full'} run, horizon "
-                 f"{st['horizon']:g} s, dt = {st['dt']:g}, ensembles of {st['paths_paper']} "
-                 f"(the paper) and {st['paths_ours']} paths, {st['steps']} training steps.")
-    lines += ["", "![total imitation gap](figure.png)", "", "## The paper's qualitative claims",
-              "", "| case | claim | holds | detail |", "|---|---|---|---|"]
+    lines.append(
+        f"Settings: {'quick' if summary['quick'] else 'full'} run, horizon "
+        f"{st['horizon']:g} s, dt = {st['dt']:g}, ensembles of {st['paths_paper']} "
+        f"(the paper) and {st['paths_ours']} paths, {st['steps']} training steps."
+    )
+    lines += [
+        "",
+        "![total imitation gap](figure.png)",
+        "",
+        "## The paper's qualitative claims",
+        "",
+        "| case | claim | holds | detail |",
+        "|---|---|---|---|",
+    ]
     for c in summary["claims"]:
         lines.append(f"| {c['case']} | {c['claim']} | {_f(c['holds'])} | {c['detail']} |")
     hg = summary["heldout_gaps"]
-    lines += ["", "## TaSIL vs behaviour cloning (same data and budget)", "",
-              "| method | held-out gap mean | held-out gap max |", "|---|---|---|",
-              f"| TaSIL (order 1) | {_f(hg['tasil']['mean'])} | {_f(hg['tasil']['max'])} |",
-              f"| BC | {_f(hg['bc']['mean'])} | {_f(hg['bc']['max'])} |", ""]
+    lines += [
+        "",
+        "## TaSIL vs behaviour cloning (same data and budget)",
+        "",
+        "| method | held-out gap mean | held-out gap max |",
+        "|---|---|---|",
+        f"| TaSIL (order 1) | {_f(hg['tasil']['mean'])} | {_f(hg['tasil']['max'])} |",
+        f"| BC | {_f(hg['bc']['mean'])} | {_f(hg['bc']['max'])} |",
+        "",
+    ]
     lines += ["## Validation (bound vs empirical)", ""]
     for label, rep in runs.items():
         lines.append(f"### {label} ensemble")

@@ -59,23 +59,30 @@ class SimSettings:
     def from_table(table: Mapping[str, Any]) -> SimSettings:
         extra = set(table) - SIM_KEYS
         if extra:
-            raise SpecError(f"unknown key(s) {sorted(extra)}; allowed {sorted(SIM_KEYS)}",
-                            field="simulation")
+            raise SpecError(
+                f"unknown key(s) {sorted(extra)}; allowed {sorted(SIM_KEYS)}", field="simulation"
+            )
         kw: dict[str, Any] = {}
         for key in ("dt", "omega", "lambda_s", "Ts"):
             if key in table:
                 v = table[key]
-                if isinstance(v, bool) or not isinstance(v, int | float) or not v > 0 or \
-                        not math.isfinite(v):
-                    raise SpecError(f"must be a finite number > 0, got {v!r}",
-                                    field=f"simulation.{key}")
+                if (
+                    isinstance(v, bool)
+                    or not isinstance(v, int | float)
+                    or not v > 0
+                    or not math.isfinite(v)
+                ):
+                    raise SpecError(
+                        f"must be a finite number > 0, got {v!r}", field=f"simulation.{key}"
+                    )
                 kw[key] = float(v)
         for key in ("paths", "chunk_size", "record_every"):
             if key in table:
                 v = table[key]
                 if isinstance(v, bool) or not isinstance(v, int) or v < 1:
-                    raise SpecError(f"must be a positive integer, got {v!r}",
-                                    field=f"simulation.{key}")
+                    raise SpecError(
+                        f"must be a positive integer, got {v!r}", field=f"simulation.{key}"
+                    )
                 kw[key] = int(v)
         return SimSettings(**kw)
 
@@ -93,39 +100,86 @@ def x0_sampler(box) -> Any:
     return sample
 
 
-def _check(name: str, bound: float | None, stat_value: float, ci_low: float, ci_high: float,
-           what: str, note: str = "") -> dict[str, Any]:
+def _check(
+    name: str,
+    bound: float | None,
+    stat_value: float,
+    ci_low: float,
+    ci_high: float,
+    what: str,
+    note: str = "",
+) -> dict[str, Any]:
     if bound is None or not math.isfinite(bound):
         holds = True
         ratio = math.inf if bound is not None else None
-        note = (note + "; " if note else "") + ("bound is vacuous (infinite)" if bound is not None
-                                                 else "no bound certified")
+        note = (note + "; " if note else "") + (
+            "bound is vacuous (infinite)" if bound is not None else "no bound certified"
+        )
     else:
         holds = not (ci_low > bound)
         ratio = bound / stat_value if stat_value > 0 else math.inf
-    return {"name": name, "what": what, "bound": bound, "empirical": stat_value,
-            "ci_low": ci_low, "ci_high": ci_high, "ratio": ratio, "holds": bool(holds),
-            "note": note}
+    return {
+        "name": name,
+        "what": what,
+        "bound": bound,
+        "empirical": stat_value,
+        "ci_low": ci_low,
+        "ci_high": ci_high,
+        "ratio": ratio,
+        "holds": bool(holds),
+        "note": note,
+    }
 
 
-def checks_from_result(res: Any, rho_tasil: float | None, rho_l1: float | None,
-                       rho_total: float | None, p: int, kappa: float | None,
-                       delta: float | None, with_l1: bool) -> list[dict[str, Any]]:
+def checks_from_result(
+    res: Any,
+    rho_tasil: float | None,
+    rho_l1: float | None,
+    rho_total: float | None,
+    p: int,
+    kappa: float | None,
+    delta: float | None,
+    with_l1: bool,
+) -> list[dict[str, Any]]:
     """The validation checks of one simulation result against the certified numbers."""
     out = []
     pol = res.gap("policy")
-    out.append(_check("policy_gap", rho_tasil, pol.max_mean, pol.max_ci_low, pol.max_ci_high,
-                      "max_t E||x'_t - x*_t|| vs rho_TaSIL"))
+    out.append(
+        _check(
+            "policy_gap",
+            rho_tasil,
+            pol.max_mean,
+            pol.max_ci_low,
+            pol.max_ci_high,
+            "max_t E||x'_t - x*_t|| vs rho_TaSIL",
+        )
+    )
     unc = res.gap("uncertainty_l1" if with_l1 else "uncertainty_true")
     tot = res.gap("total_l1" if with_l1 else "total_true")
-    out.append(_check("uncertainty_gap", rho_l1, unc.max_mean, unc.max_ci_low, unc.max_ci_high,
-                      "max_t E||X_t - x'_t|| vs rho_L1(p)"))
+    out.append(
+        _check(
+            "uncertainty_gap",
+            rho_l1,
+            unc.max_mean,
+            unc.max_ci_low,
+            unc.max_ci_high,
+            "max_t E||X_t - x'_t|| vs rho_L1(p)",
+        )
+    )
     if p <= unc.lp_norms.shape[0]:
         lp = unc.lp_norms[p - 1]
         i = int(np.nanargmax(lp))
-        out.append(_check(f"uncertainty_L{2 * p}_norm", rho_l1, float(lp[i]), float(lp[i]),
-                          float(lp[i]), f"max_t (E||X_t - x'_t||^{2 * p})^(1/{2 * p}) vs "
-                          "rho_L1(p)", "point estimate (no confidence interval for moments)"))
+        out.append(
+            _check(
+                f"uncertainty_L{2 * p}_norm",
+                rho_l1,
+                float(lp[i]),
+                float(lp[i]),
+                float(lp[i]),
+                f"max_t (E||X_t - x'_t||^{2 * p})^(1/{2 * p}) vs rho_L1(p)",
+                "point estimate (no confidence interval for moments)",
+            )
+        )
     if kappa is not None and delta is not None and unc.kappas:
         j = int(np.argmin(np.abs(np.array(unc.kappas) - kappa)))
         freq = unc.tail_freq[j]
@@ -136,31 +190,76 @@ def checks_from_result(res: Any, rho_tasil: float | None, rho_l1: float | None,
 
         k = int(round(freq[i] * n))
         lower = float(_beta.ppf(1 - unc.level, k, n - k + 1)) if k > 0 else 0.0
-        out.append(_check("tail_frequency", delta, float(freq[i]), lower,
-                          float(unc.tail_upper[j][i]), f"max_t P(||X_t - x'_t|| >= kappa = "
-                          f"{kappa:.4g}) vs delta"))
-    out.append(_check("total_gap", rho_total, tot.max_mean, tot.max_ci_low, tot.max_ci_high,
-                      "max_t E||X_t - x*_t|| vs rho = rho_TaSIL + rho_L1"))
+        out.append(
+            _check(
+                "tail_frequency",
+                delta,
+                float(freq[i]),
+                lower,
+                float(unc.tail_upper[j][i]),
+                f"max_t P(||X_t - x'_t|| >= kappa = {kappa:.4g}) vs delta",
+            )
+        )
+    out.append(
+        _check(
+            "total_gap",
+            rho_total,
+            tot.max_mean,
+            tot.max_ci_low,
+            tot.max_ci_high,
+            "max_t E||X_t - x*_t|| vs rho = rho_TaSIL + rho_L1",
+        )
+    )
     return out
 
 
-def run_scenarios(s: System, *, paths: int, seed: int, dt: float, T: float, l1_params: Any,
-                  chunk_size: int, record_every: int, kappas: tuple[float, ...] = (),
-                  p_max: int = 4, w2_times: tuple[float, ...] = (), run_dir: Path | None = None,
-                  progress: bool = False):
+def run_scenarios(
+    s: System,
+    *,
+    paths: int,
+    seed: int,
+    dt: float,
+    T: float,
+    l1_params: Any,
+    chunk_size: int,
+    record_every: int,
+    kappas: tuple[float, ...] = (),
+    p_max: int = 4,
+    w2_times: tuple[float, ...] = (),
+    run_dir: Path | None = None,
+    progress: bool = False,
+):
     """Simulate the four scenarios of the DRIP paper for ``s`` (with its learned policy)."""
     from drip_cert.sim.engine import SimConfig, simulate
 
-    cfg = SimConfig(T=T, dt=dt, n_paths=paths, seed=seed, chunk_size=min(chunk_size, paths),
-                    l1=l1_params, record_every=record_every, kappas=kappas, p_max=p_max,
-                    w2_times=w2_times, w2_points=min(2000, max(2, paths // 2)))
-    return simulate(s.sim_model(), cfg, x0_sampler(s.support), run_dir=run_dir,
-                    progress=progress)
+    cfg = SimConfig(
+        T=T,
+        dt=dt,
+        n_paths=paths,
+        seed=seed,
+        chunk_size=min(chunk_size, paths),
+        l1=l1_params,
+        record_every=record_every,
+        kappas=kappas,
+        p_max=p_max,
+        w2_times=w2_times,
+        w2_points=min(2000, max(2, paths // 2)),
+    )
+    return simulate(s.sim_model(), cfg, x0_sampler(s.support), run_dir=run_dir, progress=progress)
 
 
-def validate(s: System, cert: Any, sim: SimSettings, *, paths: int, seed: int,
-             practical_ts: float | None = None, horizon: float | None = None,
-             progress: bool = False, run_dir: Path | None = None) -> dict[str, Any]:
+def validate(
+    s: System,
+    cert: Any,
+    sim: SimSettings,
+    *,
+    paths: int,
+    seed: int,
+    practical_ts: float | None = None,
+    horizon: float | None = None,
+    progress: bool = False,
+    run_dir: Path | None = None,
+) -> dict[str, Any]:
     """Validate certificate ``cert`` of ``s`` (which must have a learned policy) by simulation.
 
     Returns the JSON-ready report with the keys ``certificate``, ``empirical``, ``checks``,
@@ -169,8 +268,11 @@ def validate(s: System, cert: Any, sim: SimSettings, *, paths: int, seed: int,
     from drip_cert.control.l1drac import L1Params
 
     if s.learned is None:
-        raise SpecError("validation needs a learned policy (policy.learned, or train one with "
-                        "`drip-cert train`)", field="policy.learned")
+        raise SpecError(
+            "validation needs a learned policy (policy.learned, or train one with "
+            "`drip-cert train`)",
+            field="policy.learned",
+        )
     T = float(horizon or s.horizon)
     notes: list[str] = []
     design = cert.l1.design if (cert.l1 is not None and cert.l1.feasible) else None
@@ -188,15 +290,18 @@ def validate(s: System, cert: Any, sim: SimSettings, *, paths: int, seed: int,
             notes.append(
                 f"the certified T_s = {design.Ts:.3g} s needs {n_steps:.3g} Euler steps per path "
                 f"over T = {T:g} s (limit {MAX_STEPS}): simulated at a practical T_s instead; "
-                "these results are NOT a validation of the certificate")
+                "these results are NOT a validation of the certificate"
+            )
     if not at_cert:
         ts = practical_ts or sim.Ts
         dt = min(sim.dt, ts)
         dt = ts / max(1, round(ts / dt))
         params = L1Params(sim.omega, sim.lambda_s, ts, dt)
         if design is None:
-            notes.append("no feasible L1-DRAC design is certified: the L1 run uses practical "
-                         "parameters and no uncertainty bound is checked")
+            notes.append(
+                "no feasible L1-DRAC design is certified: the L1 run uses practical "
+                "parameters and no uncertainty bound is checked"
+            )
     rho_l1 = cert.rho_l1 if at_cert else None
     rho_tasil = cert.rho_tasil
     rho_total = cert.rho if at_cert else None
@@ -206,61 +311,104 @@ def validate(s: System, cert: Any, sim: SimSettings, *, paths: int, seed: int,
     record_every = max(1, int(round(T / dt)) // 200)
     while int(round(T / dt)) % record_every:
         record_every -= 1
-    res = run_scenarios(s, paths=paths, seed=seed, dt=dt, T=T, l1_params=params,
-                        chunk_size=sim.chunk_size, record_every=record_every,
-                        kappas=(kappa,) if kappa else (), p_max=max(4, p),
-                        w2_times=(T,), run_dir=run_dir, progress=progress)
+    res = run_scenarios(
+        s,
+        paths=paths,
+        seed=seed,
+        dt=dt,
+        T=T,
+        l1_params=params,
+        chunk_size=sim.chunk_size,
+        record_every=record_every,
+        kappas=(kappa,) if kappa else (),
+        p_max=max(4, p),
+        w2_times=(T,),
+        run_dir=run_dir,
+        progress=progress,
+    )
     checks = checks_from_result(res, rho_tasil, rho_l1, rho_total, p, kappa, delta, True)
     short = None
     if design is not None and not at_cert:
         if design.Ts >= MIN_SIMULABLE_TS:
             t_short = SHORT_STEPS * design.Ts
-            sres = run_scenarios(s, paths=SHORT_PATHS, seed=seed, dt=design.Ts, T=t_short,
-                                 l1_params=L1Params(design.omega, design.lambda_s, design.Ts,
-                                                    design.Ts),
-                                 chunk_size=SHORT_PATHS, record_every=SHORT_STEPS // 100,
-                                 kappas=(design.kappa,) if design.kappa else (),
-                                 p_max=max(4, p))
-            short = {"horizon": t_short, "paths": SHORT_PATHS,
-                     "checks": checks_from_result(sres, None, cert.rho_l1, None, p,
-                                                  design.kappa, design.delta, True),
-                     "note": f"short horizon [0, {t_short:.3g}] s at the certified parameters"}
+            sres = run_scenarios(
+                s,
+                paths=SHORT_PATHS,
+                seed=seed,
+                dt=design.Ts,
+                T=t_short,
+                l1_params=L1Params(design.omega, design.lambda_s, design.Ts, design.Ts),
+                chunk_size=SHORT_PATHS,
+                record_every=SHORT_STEPS // 100,
+                kappas=(design.kappa,) if design.kappa else (),
+                p_max=max(4, p),
+            )
+            short = {
+                "horizon": t_short,
+                "paths": SHORT_PATHS,
+                "checks": checks_from_result(
+                    sres, None, cert.rho_l1, None, p, design.kappa, design.delta, True
+                ),
+                "note": f"short horizon [0, {t_short:.3g}] s at the certified parameters",
+            }
         else:
-            notes.append(f"no short-horizon run at the certified T_s = {design.Ts:.3g} s either: "
-                         f"below {MIN_SIMULABLE_TS:g} s an Euler step is lost in float64 rounding")
+            notes.append(
+                f"no short-horizon run at the certified T_s = {design.Ts:.3g} s either: "
+                f"below {MIN_SIMULABLE_TS:g} s an Euler step is lost in float64 rounding"
+            )
     if not at_cert:
         for c in checks:
             c["note"] = (c["note"] + "; " if c["note"] else "") + "not at certified parameters"
     emp = {}
-    for key, gap in (("tig_max", "total_l1"), ("policy_ig_max", "policy"),
-                     ("uncertainty_ig_max", "uncertainty_l1"), ("tig_max_without_l1",
-                                                                 "total_true")):
+    for key, gap in (
+        ("tig_max", "total_l1"),
+        ("policy_ig_max", "policy"),
+        ("uncertainty_ig_max", "uncertainty_l1"),
+        ("tig_max_without_l1", "total_true"),
+    ):
         g = res.gap(gap)
-        emp[key] = {"value": g.max_mean, "ci_low": g.max_ci_low, "ci_high": g.max_ci_high,
-                    "argmax_time": g.argmax_time}
+        emp[key] = {
+            "value": g.max_mean,
+            "ci_low": g.max_ci_low,
+            "ci_high": g.max_ci_high,
+            "argmax_time": g.argmax_time,
+        }
     emp["w2"] = [w.to_dict() for w in res.w2]
-    notes.append("W2 estimates from samples are biased upward (see the same-law baselines "
-                 "beside each); they are reported, not checked against a bound")
+    notes.append(
+        "W2 estimates from samples are biased upward (see the same-law baselines "
+        "beside each); they are reported, not checked against a bound"
+    )
     return {
         "certificate": cert.to_dict(),
         "empirical": emp,
         "checks": checks,
         "at_certified_parameters": at_cert,
         "short_horizon_at_certified_parameters": short,
-        "l1_parameters": {"omega": params.omega, "lambda_s": params.lambda_s, "Ts": params.Ts,
-                          "dt": params.dt},
+        "l1_parameters": {
+            "omega": params.omega,
+            "lambda_s": params.lambda_s,
+            "Ts": params.Ts,
+            "dt": params.dt,
+        },
         "diverged_fraction": {st.name: st.diverged_fraction for st in res.status},
         "simulation": res.to_dict(),
-        "holds": all(c["holds"] for c in checks) and (
-            short is None or all(c["holds"] for c in short["checks"])),
+        "holds": all(c["holds"] for c in checks)
+        and (short is None or all(c["holds"] for c in short["checks"])),
         "notes": notes,
         "_result": res,
     }
 
 
-def validate_spec(spec_path: str | Path, *, trajectories: int = 1000, seed: int = 0,
-                  out: str | Path | None = None, practical_ts: float | None = None,
-                  quick: bool = False, progress: bool = False) -> dict[str, Any]:
+def validate_spec(
+    spec_path: str | Path,
+    *,
+    trajectories: int = 1000,
+    seed: int = 0,
+    out: str | Path | None = None,
+    practical_ts: float | None = None,
+    quick: bool = False,
+    progress: bool = False,
+) -> dict[str, Any]:
     """``drip-cert validate``: certify the spec's system and validate it by simulation.
 
     A spec without a learned policy gets one trained by TaSIL with its ``[tasil]`` settings.
@@ -279,15 +427,25 @@ def validate_spec(spec_path: str | Path, *, trajectories: int = 1000, seed: int 
             st = type(st)(**{**st.__dict__, "steps": min(st.steps, 300)})
         tp = train_on_system(s, st, progress=progress)
         s = tp.system
-        notes.append(f"no learned policy in the spec: trained {st.method} ({st.steps} steps, "
-                     f"{st.trajectories} trajectories, seed {st.seed})")
+        notes.append(
+            f"no learned policy in the spec: trained {st.method} ({st.steps} steps, "
+            f"{st.trajectories} trajectories, seed {st.seed})"
+        )
         spec = Spec(spec.path, s, spec.tables)
     cert = certify(spec)
     sim = SimSettings.from_table(spec.table("simulation"))
     paths = min(trajectories, 200) if quick else trajectories
     horizon = min(s.horizon, 2.0) if quick else None
-    rep = validate(s, cert, sim, paths=paths, seed=seed, practical_ts=practical_ts,
-                   horizon=horizon, progress=progress)
+    rep = validate(
+        s,
+        cert,
+        sim,
+        paths=paths,
+        seed=seed,
+        practical_ts=practical_ts,
+        horizon=horizon,
+        progress=progress,
+    )
     rep["notes"] = notes + rep["notes"]
     res = rep.pop("_result")
     if out is not None:

@@ -32,14 +32,22 @@ def _spec_path_packaged(name: str) -> Path:
     if name != "paper-4d":
         raise SpecError(f"unknown experiment {name!r}; available: paper-4d")
     if not PAPER_SPEC.is_file():
-        raise SpecError(f"the bundled example {PAPER_SPEC} is missing (run from a source "
-                        "checkout of drip-cert)")
+        raise SpecError(
+            f"the bundled example {PAPER_SPEC} is missing (run from a source checkout of drip-cert)"
+        )
     return PAPER_SPEC
 
 
-def train_from_spec(spec_path: str | Path, *, method: str, trajectories: int, seed: int,
-                    out: str | Path, steps: int | None = None,
-                    progress: bool = True) -> dict[str, Any]:
+def train_from_spec(
+    spec_path: str | Path,
+    *,
+    method: str,
+    trajectories: int,
+    seed: int,
+    out: str | Path,
+    steps: int | None = None,
+    progress: bool = True,
+) -> dict[str, Any]:
     """``drip-cert train``: demonstrations, training, held-out gap; writes ``out``.
 
     Files: ``policy.npz``/``policy.json`` (the MLP), ``demonstrations.npz`` (training data),
@@ -53,15 +61,25 @@ def train_from_spec(spec_path: str | Path, *, method: str, trajectories: int, se
 
     spec = load_spec(spec_path)
     st = tasil_settings(spec.table("tasil"))
-    st = dataclasses.replace(st, method=method, trajectories=trajectories, seed=seed,
-                             steps=steps or st.steps)
+    st = dataclasses.replace(
+        st, method=method, trajectories=trajectories, seed=seed, steps=steps or st.steps
+    )
     t0 = time.perf_counter()
     tp = train_on_system(spec.system, st, progress=progress)
     wall = time.perf_counter() - t0
     s = spec.system
-    gaps = (evaluate_gap(nominal_field(s), s.numeric.expert, tp.mlp.apply_jax,
-                         tp.heldout.x0, s.horizon, st.samples) if tp.heldout is not None
-            else np.array([]))
+    gaps = (
+        evaluate_gap(
+            nominal_field(s),
+            s.numeric.expert,
+            tp.mlp.apply_jax,
+            tp.heldout.x0,
+            s.horizon,
+            st.samples,
+        )
+        if tp.heldout is not None
+        else np.array([])
+    )
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     tp.mlp.save(out / "policy.npz")
@@ -79,9 +97,12 @@ def train_from_spec(spec_path: str | Path, *, method: str, trajectories: int, se
         "heldout_gap_mean": float(np.mean(gaps)) if gaps.size else math.nan,
         "heldout_gap_max": float(np.max(gaps)) if gaps.size else math.nan,
         "policy": str(out / "policy.npz"),
-        "use_in_spec": ("[blocks.pi_il]\nkind = \"mlp\"\nweights = \"policy.npz\"\n"
-                        f"inputs = {s.n}\noutputs = {s.m}\n\n[policy]\nlearned = ["
-                        + ", ".join(f'"pi_il(x)[{j}]"' for j in range(s.m)) + "]"),
+        "use_in_spec": (
+            '[blocks.pi_il]\nkind = "mlp"\nweights = "policy.npz"\n'
+            f"inputs = {s.n}\noutputs = {s.m}\n\n[policy]\nlearned = ["
+            + ", ".join(f'"pi_il(x)[{j}]"' for j in range(s.m))
+            + "]"
+        ),
     }
     atomic_write_json(out / "train.json", summary)
     return summary
@@ -100,13 +121,15 @@ class ReproduceSettings:
     @staticmethod
     def make(quick: bool) -> ReproduceSettings:
         if quick:
-            return ReproduceSettings(steps=200, paths_paper=100, paths_ours=300, horizon=3.0,
-                                     dt=2e-3)
+            return ReproduceSettings(
+                steps=200, paths_paper=100, paths_ours=300, horizon=3.0, dt=2e-3
+            )
         return ReproduceSettings()
 
 
-def reproduce(name: str, *, out: str | Path, quick: bool = False, seed: int = 0,
-              progress: bool = True) -> dict[str, Any]:
+def reproduce(
+    name: str, *, out: str | Path, quick: bool = False, seed: int = 0, progress: bool = True
+) -> dict[str, Any]:
     """``drip-cert reproduce paper-4d``; see the module docstring."""
     from drip_cert.bounds.certificate import certify
     from drip_cert.learn.tasil import evaluate_gap
@@ -141,8 +164,14 @@ def reproduce(name: str, *, out: str | Path, quick: bool = False, seed: int = 0,
     trained["bc"].mlp.save(out / "policy_bc.npz")
     heldout_gaps = {}
     for method, t in trained.items():
-        g = evaluate_gap(nominal_field(base), base.numeric.expert, t.mlp.apply_jax,
-                         tp.heldout.x0, base.horizon, st.samples)
+        g = evaluate_gap(
+            nominal_field(base),
+            base.numeric.expert,
+            t.mlp.apply_jax,
+            tp.heldout.x0,
+            base.horizon,
+            st.samples,
+        )
         heldout_gaps[method] = {"mean": float(np.mean(g)), "max": float(np.max(g))}
     t0 = time.perf_counter()
     cert = certify(Spec(spec.path, s, spec.tables))
@@ -154,15 +183,19 @@ def reproduce(name: str, *, out: str | Path, quick: bool = False, seed: int = 0,
     runs = {}
     for label, paths in (("paper", rs.paths_paper), ("ours", rs.paths_ours)):
         t0 = time.perf_counter()
-        rep = validate(s, cert, sim, paths=paths, seed=seed, horizon=rs.horizon,
-                       progress=progress)
+        rep = validate(s, cert, sim, paths=paths, seed=seed, horizon=rs.horizon, progress=progress)
         timings[f"simulate_{label}_s"] = time.perf_counter() - t0
         runs[label] = rep
     res = runs["ours"]["_result"]
     res.save(out / "simulation")
     claims = qualitative_claims(res)
-    fig_paths = reproduce_figure(res, runs["paper"]["_result"], cert, out,
-                                 at_certified=runs["ours"]["at_certified_parameters"])
+    fig_paths = reproduce_figure(
+        res,
+        runs["paper"]["_result"],
+        cert,
+        out,
+        at_certified=runs["ours"]["at_certified_parameters"],
+    )
     summary_obj = {
         "experiment": name,
         "quick": quick,
@@ -170,27 +203,34 @@ def reproduce(name: str, *, out: str | Path, quick: bool = False, seed: int = 0,
         "heldout_gaps": heldout_gaps,
         "tasil_better_than_bc": heldout_gaps["tasil"]["mean"] < heldout_gaps["bc"]["mean"],
         "claims": claims,
-        "validation": {k: {kk: vv for kk, vv in v.items() if kk not in ("_result",
-                                                                           "certificate")}
-                       for k, v in runs.items()},
+        "validation": {
+            k: {kk: vv for kk, vv in v.items() if kk not in ("_result", "certificate")}
+            for k, v in runs.items()
+        },
         "timings": timings,
         "figures": [str(p) for p in fig_paths],
     }
     summary_obj["holds"] = all(c["holds"] for c in claims) and all(
-        r["holds"] for r in runs.values())
+        r["holds"] for r in runs.values()
+    )
     timings["total_s"] = time.perf_counter() - t_start
     atomic_write_json(out / "reproduce.json", summary_obj)
     atomic_write_text(out / "report.md", reproduce_markdown(summary_obj, cert, runs))
     lines = [f"paper-4d reproduced in {timings['total_s']:.0f} s -> {out}/report.md"]
     for c in claims:
-        lines.append(f"  claim {c['case']}: {c['claim']}: {'holds' if c['holds'] else 'FAILS'} "
-                     f"({c['detail']})")
-    lines.append(f"  TaSIL held-out gap {heldout_gaps['tasil']['mean']:.4g} vs BC "
-                 f"{heldout_gaps['bc']['mean']:.4g}")
-    lines.append(f"  certified: {cert.certified}; validation "
-                 + ("holds" if runs["ours"]["holds"] else "VIOLATED")
-                 + ("" if runs["ours"]["at_certified_parameters"]
-                    else " (not at certified parameters)"))
+        lines.append(
+            f"  claim {c['case']}: {c['claim']}: {'holds' if c['holds'] else 'FAILS'} "
+            f"({c['detail']})"
+        )
+    lines.append(
+        f"  TaSIL held-out gap {heldout_gaps['tasil']['mean']:.4g} vs BC "
+        f"{heldout_gaps['bc']['mean']:.4g}"
+    )
+    lines.append(
+        f"  certified: {cert.certified}; validation "
+        + ("holds" if runs["ours"]["holds"] else "VIOLATED")
+        + ("" if runs["ours"]["at_certified_parameters"] else " (not at certified parameters)")
+    )
     summary_obj["summary"] = "\n".join(lines)
     return json.loads(json.dumps(_strip(summary_obj), default=str))
 
@@ -215,13 +255,22 @@ def qualitative_claims(res: Any) -> list[dict[str, Any]]:
     k10 = max(1, len(tru.mean) // 10)
     grow = float(tru.mean[-1]) / max(float(tru.mean[k10]), 1e-300)
     return [
-        {"case": "(i)", "claim": "TaSIL on the nominal system: small", "holds":
-         bool(pol.max_mean < tru.max_mean), "detail": f"max_t E gap {pol.max_mean:.4g} vs "
-         f"{tru.max_mean:.4g} for (ii)"},
-        {"case": "(ii)", "claim": "TaSIL on the uncertain system: grows (destabilisation)",
-         "holds": bool(grow > GROWTH_FACTOR), "detail": f"E gap at T / at T/10 = {grow:.3g} "
-         f"(threshold {GROWTH_FACTOR:g})"},
-        {"case": "(iii)", "claim": "TaSIL + L1-DRAC on the uncertain system: stays bounded",
-         "holds": bool(l1.max_mean * GROWTH_FACTOR < tru.max_mean),
-         "detail": f"max_t E gap {l1.max_mean:.4g} vs {tru.max_mean:.4g} for (ii)"},
+        {
+            "case": "(i)",
+            "claim": "TaSIL on the nominal system: small",
+            "holds": bool(pol.max_mean < tru.max_mean),
+            "detail": f"max_t E gap {pol.max_mean:.4g} vs {tru.max_mean:.4g} for (ii)",
+        },
+        {
+            "case": "(ii)",
+            "claim": "TaSIL on the uncertain system: grows (destabilisation)",
+            "holds": bool(grow > GROWTH_FACTOR),
+            "detail": f"E gap at T / at T/10 = {grow:.3g} (threshold {GROWTH_FACTOR:g})",
+        },
+        {
+            "case": "(iii)",
+            "claim": "TaSIL + L1-DRAC on the uncertain system: stays bounded",
+            "holds": bool(l1.max_mean * GROWTH_FACTOR < tru.max_mean),
+            "detail": f"max_t E gap {l1.max_mean:.4g} vs {tru.max_mean:.4g} for (ii)",
+        },
     ]

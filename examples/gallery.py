@@ -40,16 +40,26 @@ def run_one(name: str, out: Path, quick: bool = False, seed: int = 0) -> dict:
     atomic_write_text(out / f"{name}.md", certificate_markdown(cert))
     sim = SimSettings.from_table(spec.table("simulation"))
     horizon = 2.0 if quick else spec.system.horizon
-    big = validate(tp.system, cert, sim, paths=200 if quick else 5000, seed=seed,
-                   horizon=horizon)
+    big = validate(tp.system, cert, sim, paths=200 if quick else 5000, seed=seed, horizon=horizon)
     small = validate(tp.system, cert, sim, paths=100, seed=seed, horizon=horizon)
-    figs = reproduce_figure(big["_result"], small["_result"], cert, out,
-                            at_certified=big["at_certified_parameters"], name=name)
+    figs = reproduce_figure(
+        big["_result"],
+        small["_result"],
+        cert,
+        out,
+        at_certified=big["at_certified_parameters"],
+        name=name,
+    )
     for f in figs:
         f.replace(out / f"{name}{f.suffix}")
     failing = [a.id for a in cert.assumptions if not a.holds]
-    return {"name": name, "certified": cert.certified, "failing": failing,
-            "validation_holds": big["holds"], "figure": str(out / f"{name}.png")}
+    return {
+        "name": name,
+        "certified": cert.certified,
+        "failing": failing,
+        "validation_holds": big["holds"],
+        "figure": str(out / f"{name}.png"),
+    }
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -60,8 +70,10 @@ def main(argv: list[str] | None = None) -> int:
     args = p.parse_args(argv)
     for name in args.names:
         s = run_one(name, Path(args.out), quick=args.quick)
-        print(f"{name}: certified={s['certified']} failing={s['failing']} "
-              f"validation_holds={s['validation_holds']} figure={s['figure']}")
+        print(
+            f"{name}: certified={s['certified']} failing={s['failing']} "
+            f"validation_holds={s['validation_holds']} figure={s['figure']}"
+        )
     return 0
 
 

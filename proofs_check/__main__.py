@@ -33,13 +33,17 @@ def main(argv: list[str] | None = None) -> int:
     else:
         w = max(len(r.name) for r in results)
         for r in results:
-            print(f"{r.name:<{w}}  {r.verdict.value:<7}  residual {r.residual: .2e}  {r.label}"
-                  + (f"  [{r.erratum}]" if r.erratum else ""))
+            print(
+                f"{r.name:<{w}}  {r.verdict.value:<7}  residual {r.residual: .2e}  {r.label}"
+                + (f"  [{r.erratum}]" if r.erratum else "")
+            )
             if args.verbose or r.verdict is Verdict.FAIL:
                 print(f"{'':<{w}}    {r.detail}")
         counts = {v: sum(r.verdict is v for r in results) for v in Verdict}
-        print(f"{len(results)} checks: {counts[Verdict.PASS]} PASS, {counts[Verdict.ERRATUM]} "
-              f"ERRATUM (see proofs_check/ERRATA.md), {counts[Verdict.FAIL]} FAIL")
+        print(
+            f"{len(results)} checks: {counts[Verdict.PASS]} PASS, {counts[Verdict.ERRATUM]} "
+            f"ERRATUM (see proofs_check/ERRATA.md), {counts[Verdict.FAIL]} FAIL"
+        )
     return 1 if any(r.verdict is Verdict.FAIL for r in results) else 0
 
 

@@ -26,8 +26,17 @@ CONSTANTS = tuple(k for k in SYM if k not in {"lam", "lam_s", "omega", "T_s", "x
 HOLDER = ("L_p", "L_sigma", "L_p_par", "L_sigma_par")
 """1/2-Hoelder constants of the diffusion (Assumptions 1, 5, 6)."""
 
-DIFFUSION = ("Delta_p", "Delta_sigma", "Delta_p_par", "Delta_sigma_par", *HOLDER,
-             "Lh_p", "Lh_sigma", "Lh_p_par", "Lh_sigma_par")
+DIFFUSION = (
+    "Delta_p",
+    "Delta_sigma",
+    "Delta_p_par",
+    "Delta_sigma_par",
+    *HOLDER,
+    "Lh_p",
+    "Lh_sigma",
+    "Lh_p_par",
+    "Lh_sigma_par",
+)
 """Every constant that is zero when there is no diffusion at all."""
 
 
@@ -59,8 +68,9 @@ def ts_maps(branch=_exact, s: dict[str, sp.Expr] | None = None) -> dict[str, sp.
     g1p = (1 - sp.exp(-2 * lam * Ts)) * (1 - sp.exp(-w * Ts))  # (A.13a)
     r = ls / w * (sp.exp(w * Ts) - 1) / (sp.exp(ls * Ts) - 1)
     g2 = branch("max", (sp.exp((w - ls) * Ts), sp.Integer(1))) * r  # (A.13b)
-    g2p = branch("max", (branch("abs", (1 - sp.exp((w - ls) * Ts) * r,)),
-                         branch("abs", (1 - r,))))  # (A.13c)
+    g2p = branch(
+        "max", (branch("abs", (1 - sp.exp((w - ls) * Ts) * r,)), branch("abs", (1 - r,)))
+    )  # (A.13c)
     gpp = pp * g2p + ppp * sp.sqrt(1 - sp.exp(-2 * w * Ts)) * (2 + g2)  # (A.13d)
     gmu = S["L_mu_par"] + S["L_mu"] * g2 * DT  # (A.14a)
     ghmu = S["Lh_mu_par"] + S["Lh_mu"] * g2 * DT
@@ -69,8 +79,9 @@ def ts_maps(branch=_exact, s: dict[str, sp.Expr] | None = None) -> dict[str, sp.
     gsig = Lpar + g2 * DT * (S["L_p"] + S["L_sigma"])  # (A.14b)
     ghsig = Lhpar + g2 * DT * (S["Lh_p"] + S["Lh_sigma"])  # (A.14c)
     E = Dg * DT * sp.exp(-ls * Ts)
-    D1 = (2 * Ts * (S["Delta_f"] + (1 + E) * Dmu + pp * E * g1 * (Dp + Ds))
-          + 2 * sp.sqrt(2) * sp.sqrt(Ts) * pp * (Dp + Ds))  # (A.15a)
+    D1 = 2 * Ts * (S["Delta_f"] + (1 + E) * Dmu + pp * E * g1 * (Dp + Ds)) + 2 * sp.sqrt(
+        2
+    ) * sp.sqrt(Ts) * pp * (Dp + Ds)  # (A.15a)
     D2 = 2 * pp * Ds * (sp.sqrt(2) * sp.sqrt(Ts) + Ts * E * g1)  # (A.15b)
     D3 = 2 * Ts * (S["Delta_f"] + (1 + E) * Dmu)  # (A.15c)
     one_m = 1 - sp.exp(-ls * Ts)
@@ -80,14 +91,35 @@ def ts_maps(branch=_exact, s: dict[str, sp.Expr] | None = None) -> dict[str, sp.
     Dsig1 = (Lpar * sp.sqrt(D1) + Ts * Lhpar) * (1 + g2) + gsig * sp.sqrt(D1) + Ts * ghsig
     Dsig2 = sp.sqrt(D2) * (gsig + (1 + g2) * Lpar)  # (A.17b)
     Dsig3 = sp.sqrt(D3) * (gsig + (1 + g2) * Lpar)
-    out.update(gamma1=g1, gamma1p=g1p, gamma2=g2, gamma2p=g2p, gammapp=gpp, gamma_mu=gmu,
-               gammah_mu=ghmu, gamma_sigma=gsig, gammah_sigma=ghsig, Dbar1=D1, Dbar2=D2,
-               Dbar3=D3, Delta_mu1=Dmu1, Delta_mu2=Dmu2, Delta_mu3=Dmu3, Delta_sigma1=Dsig1,
-               Delta_sigma2=Dsig2, Delta_sigma3=Dsig3)
+    out.update(
+        gamma1=g1,
+        gamma1p=g1p,
+        gamma2=g2,
+        gamma2p=g2p,
+        gammapp=gpp,
+        gamma_mu=gmu,
+        gammah_mu=ghmu,
+        gamma_sigma=gsig,
+        gammah_sigma=ghsig,
+        Dbar1=D1,
+        Dbar2=D2,
+        Dbar3=D3,
+        Delta_mu1=Dmu1,
+        Delta_mu2=Dmu2,
+        Delta_mu3=Dmu3,
+        Delta_sigma1=Dsig1,
+        Delta_sigma2=Dsig2,
+        Delta_sigma3=Dsig3,
+    )
 
     def ups1(x):  # (A.18a)
-        return (Dmu1 + sp.sqrt(w) * pp * Dsig1 + sp.sqrt(w) * pp * Dsig2 * x ** sp.Rational(1, 4)
-                + (Dmu2 + sp.sqrt(w) * pp * Dsig3) * sp.sqrt(x) + Dmu3 * x)
+        return (
+            Dmu1
+            + sp.sqrt(w) * pp * Dsig1
+            + sp.sqrt(w) * pp * Dsig2 * x ** sp.Rational(1, 4)
+            + (Dmu2 + sp.sqrt(w) * pp * Dsig3) * sp.sqrt(x)
+            + Dmu3 * x
+        )
 
     def ups2(x):  # (A.18b)
         return gpp * (Dpp + Dsp * (1 + sp.sqrt(x)))
@@ -96,9 +128,15 @@ def ts_maps(branch=_exact, s: dict[str, sp.Expr] | None = None) -> dict[str, sp.
         return Dmup * (sp.exp(w * Ts) - 1) * (1 + x)
 
     def ups_tilde(x):  # (A.19a)
-        return (1 / lam) * (1 - sp.exp(-2 * lam * Ts)) * Dg * (
-            sp.sqrt(w) * pp * sp.sqrt(1 - sp.exp(-2 * w * Ts)) * (Dpp + Dsp * (1 + sp.sqrt(x)))
-            + Dmup * (1 + x))
+        return (
+            (1 / lam)
+            * (1 - sp.exp(-2 * lam * Ts))
+            * Dg
+            * (
+                sp.sqrt(w) * pp * sp.sqrt(1 - sp.exp(-2 * w * Ts)) * (Dpp + Dsp * (1 + sp.sqrt(x)))
+                + Dmup * (1 + x)
+            )
+        )
 
     def ups_minus(x):  # (A.19b)
         return g1p * (2 * pp * (Dpp + Dsp * (1 + sp.sqrt(x))) + Dmup / sp.sqrt(w) * (1 + x))
@@ -107,12 +145,19 @@ def ts_maps(branch=_exact, s: dict[str, sp.Expr] | None = None) -> dict[str, sp.
         return Dg**2 * (pp * Lpar * sp.sqrt(x) + S["L_mu_par"] * x / sp.sqrt(w))
 
     xi, x1, x2 = S["xi"], S["xi1"], S["xi2"]
-    out.update(U1p=ups1(xi), U2p=ups2(xi), U3p=ups3(xi), Utilde_minus=ups_tilde(xi),
-               U_minus=ups_minus(xi), U_ring=ups_ring(xi))
+    out.update(
+        U1p=ups1(xi),
+        U2p=ups2(xi),
+        U3p=ups3(xi),
+        Utilde_minus=ups_tilde(xi),
+        U_minus=ups_minus(xi),
+        U_ring=ups_ring(xi),
+    )
     den = branch("abs", (2 * lam - w,))
     out["Ua1"] = ups_tilde(x1) * x2 + w / (lam * den) * ups_ring(x2) * ups_minus(x1)  # (25a)
-    out["Ua2"] = (1 / lam) * (Dg * x2 + sp.sqrt(w) / den * ups_ring(x2)) * (
-        ups1(x1) + sp.sqrt(w) * ups2(x1))  # (25b)
+    out["Ua2"] = (
+        (1 / lam) * (Dg * x2 + sp.sqrt(w) / den * ups_ring(x2)) * (ups1(x1) + sp.sqrt(w) * ups2(x1))
+    )  # (25b)
     out["Ua3"] = (1 / den) * (2 * Dg * x2 + sp.sqrt(w) / lam * ups_ring(x2)) * ups3(x1)  # (25c)
     out["Ua_sum"] = out["Ua1"] + out["Ua2"] + out["Ua3"]
     return out

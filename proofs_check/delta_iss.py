@@ -149,8 +149,7 @@ def check_sqrt_step(ctx: Context) -> CheckResult:
         holds=bool(sym_ok and num_ok),
         residual=float(rel),
         detail=(
-            f"(sqrt a + sqrt b)^2 - (a+b) = {gap} >= 0; {n} random pairs, "
-            f"max rel viol {rel:.2e}"
+            f"(sqrt a + sqrt b)^2 - (a+b) = {gap} >= 0; {n} random pairs, max rel viol {rel:.2e}"
         ),
     )
 
@@ -229,8 +228,13 @@ def simulate_pair(sys_: ContractingSystem, xi1, xi2, v, T: float, t_eval):
         return np.concatenate([sys_.drift(z[:n], v(t)), sys_.drift(z[n:], zero)])
 
     sol = solve_ivp(
-        rhs, (0.0, T), np.concatenate([xi1, xi2]), method="DOP853",
-        rtol=ODE_RTOL, atol=ODE_ATOL, t_eval=t_eval,
+        rhs,
+        (0.0, T),
+        np.concatenate([xi1, xi2]),
+        method="DOP853",
+        rtol=ODE_RTOL,
+        atol=ODE_ATOL,
+        t_eval=t_eval,
     )
     if not sol.success:
         raise RuntimeError(f"solve_ivp failed: {sol.message}")

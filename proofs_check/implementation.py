@@ -52,16 +52,24 @@ def check_impl_iss(ctx: Context) -> CheckResult:
             tb = res.tight_bound(t, e0, sv)
             worst_order = max(worst_order, float(np.max((tb - pb) / (pb + 1e-300))))
         mine_t = tight_bound(t, e0, sv, lam, g2)
-        worst_eq = max(worst_eq, float(np.max(np.abs(res.tight_bound(t, e0, sv) - mine_t)
-                                              / (mine_t + 1e-300))))
-        worst_eq = max(worst_eq, abs(res.theta_star - lam / dg**2) / (lam / dg**2),
-                       abs(res.paper_gain_asymptotic - dg / lam) / (dg / lam))
+        worst_eq = max(
+            worst_eq, float(np.max(np.abs(res.tight_bound(t, e0, sv) - mine_t) / (mine_t + 1e-300)))
+        )
+        worst_eq = max(
+            worst_eq,
+            abs(res.theta_star - lam / dg**2) / (lam / dg**2),
+            abs(res.paper_gain_asymptotic - dg / lam) / (dg / lam),
+        )
     ok = worst_eq <= ISS_REL_TOL and worst_order <= ISS_REL_TOL
     return result(
-        name, "drip_cert.analysis.iss vs DRIP Prop. 1 (both bounds)", holds=bool(ok),
+        name,
+        "drip_cert.analysis.iss vs DRIP Prop. 1 (both bounds)",
+        holds=bool(ok),
         residual=max(worst_eq, worst_order),
-        detail=(f"max rel difference to the closed forms {worst_eq:.1e}; max (tight - paper)/paper"
-                f" over t and admissible theta {worst_order:.1e}"),
+        detail=(
+            f"max rel difference to the closed forms {worst_eq:.1e}; max (tight - paper)/paper"
+            f" over t and admissible theta {worst_order:.1e}"
+        ),
     )
 
 
@@ -84,16 +92,23 @@ def check_impl_tasil(ctx: Context) -> CheckResult:
         a, b = eps_star(h0, h1, g0, L), sharp_eps(g0, h0, h1, L)
         if b > 0:
             worst = max(worst, abs(a - b) / b)
-        c = ClassConstants(q=int(rng.integers(1, 10_000)), B_theta=float(rng.uniform(0.1, 10)),
-                           L_theta0=float(rng.uniform(0.1, 10)), L_theta1=1.0,
-                           b0=float(rng.uniform(0.1, 10)), b1=1.0)
+        c = ClassConstants(
+            q=int(rng.integers(1, 10_000)),
+            B_theta=float(rng.uniform(0.1, 10)),
+            L_theta0=float(rng.uniform(0.1, 10)),
+            L_theta1=1.0,
+            b0=float(rng.uniform(0.1, 10)),
+            b1=1.0,
+        )
         nn, dl = int(rng.integers(1, 10**7)), float(np.exp(rng.uniform(-20, -0.01)))
         theirs = rho_tasil(dl, nn, g0, 0.0, c)
         mine = float(f(g0, c.b0, c.q, c.B_theta, c.L_theta0, nn, dl))
         worst = max(worst, abs(theirs - mine) / mine)
     return result(
-        name, "drip_cert.bounds.tasil vs math/tasil.md (eps*, rho_TaSIL)",
-        holds=bool(worst <= RHO_REL_TOL), residual=worst,
+        name,
+        "drip_cert.bounds.tasil vs math/tasil.md (eps*, rho_TaSIL)",
+        holds=bool(worst <= RHO_REL_TOL),
+        residual=worst,
         detail=f"max rel difference (eps*, rho_TaSIL at tau0=0) {worst:.1e}",
     )
 
@@ -117,8 +132,14 @@ def _random_l1_constants(rng: np.random.Generator):
     return L1Constants(**vals), vals
 
 
-_MAP = {"Lh_mu": "L_mu_hat", "Lh_mu_par": "L_mu_par_hat", "Lh_p": "L_p_hat",
-        "Lh_sigma": "L_sigma_hat", "Lh_p_par": "L_p_par_hat", "Lh_sigma_par": "L_sigma_par_hat"}
+_MAP = {
+    "Lh_mu": "L_mu_hat",
+    "Lh_mu_par": "L_mu_par_hat",
+    "Lh_p": "L_p_hat",
+    "Lh_sigma": "L_sigma_hat",
+    "Lh_p_par": "L_p_par_hat",
+    "Lh_sigma_par": "L_sigma_par_hat",
+}
 
 
 @register("impl.l1drac_maps", "drip_cert.bounds.l1drac_appendix vs (A.13)-(A.19), (25); Prop. A.1")
@@ -129,10 +150,17 @@ def check_impl_l1drac_maps(ctx: Context) -> CheckResult:
 
     maps = ts_maps()
     syms = [SYM[k] for k in SYM]
-    fns = {k: sp.lambdify(syms, maps[k], modules=[{"Max": max, "Abs": abs}, "math"])
-           for k in (*XI_MAPS, "Ua1", "Ua2", "Ua3")}
-    theirs_xi = {"U1p": ap.upsilon1_prime, "U2p": ap.upsilon2_prime, "U3p": ap.upsilon3_prime,
-                 "Utilde_minus": ap.upsilon_minus_tilde, "U_minus": ap.upsilon_minus}
+    fns = {
+        k: sp.lambdify(syms, maps[k], modules=[{"Max": max, "Abs": abs}, "math"])
+        for k in (*XI_MAPS, "Ua1", "Ua2", "Ua3")
+    }
+    theirs_xi = {
+        "U1p": ap.upsilon1_prime,
+        "U2p": ap.upsilon2_prime,
+        "U3p": ap.upsilon3_prime,
+        "Utilde_minus": ap.upsilon_minus_tilde,
+        "U_minus": ap.upsilon_minus,
+    }
     theirs_a = {"Ua1": ap.upsilon_a1, "Ua2": ap.upsilon_a2, "Ua3": ap.upsilon_a3}
     rng = ctx.rng
     worst_eq = 0.0
@@ -147,30 +175,38 @@ def check_impl_l1drac_maps(ctx: Context) -> CheckResult:
         Ts = float(np.exp(rng.uniform(np.log(1e-3), np.log(20.0)))) / max(omega, lam_s)
         s = ap.sampling_constants(c, p, omega, Ts, lam_s)
         _, pp, ppp = frak_p(p)
-        env = {k: float(vals[_MAP.get(k, k)]) for k in SYM
-               if _MAP.get(k, k) in vals}
+        env = {k: float(vals[_MAP.get(k, k)]) for k in SYM if _MAP.get(k, k) in vals}
         env.update(pp=float(pp), ppp=float(ppp), lam_s=lam_s, omega=omega, T_s=Ts)
         x1, x2 = float(np.exp(rng.uniform(-5, 5))), float(np.exp(rng.uniform(-5, 5)))
         for key in XI_MAPS:
             mine = fns[key](**{**env, "xi": x1, "xi1": 0.0, "xi2": 0.0})
-            th = (ap.upsilon_ring(x1, c, p, omega) if key == "U_ring"
-                  else theirs_xi[key](x1, s))
+            th = ap.upsilon_ring(x1, c, p, omega) if key == "U_ring" else theirs_xi[key](x1, s)
             worst_eq = max(worst_eq, abs(th - mine) / (abs(mine) + 1e-300))
-            th_hi = (ap.upsilon_ring(2 * x1, c, p, omega) if key == "U_ring"
-                     else theirs_xi[key](2 * x1, s))
+            th_hi = (
+                ap.upsilon_ring(2 * x1, c, p, omega)
+                if key == "U_ring"
+                else theirs_xi[key](2 * x1, s)
+            )
             worst_mono = max(worst_mono, (th - th_hi) / (abs(th_hi) + 1e-300))
         for key, fn in theirs_a.items():
             mine = fns[key](**{**env, "xi": 0.0, "xi1": x1, "xi2": x2})
             th = fn(x1, x2, s)
             worst_eq = max(worst_eq, abs(th - mine) / (abs(mine) + 1e-300))
-            worst_mono = max(worst_mono, (th - fn(2 * x1, x2, s)) / (abs(th) + 1e-300),
-                             (th - fn(x1, 2 * x2, s)) / (abs(th) + 1e-300))
+            worst_mono = max(
+                worst_mono,
+                (th - fn(2 * x1, x2, s)) / (abs(th) + 1e-300),
+                (th - fn(x1, 2 * x2, s)) / (abs(th) + 1e-300),
+            )
     ok = worst_eq <= MAP_REL_TOL and worst_mono <= MONO_REL_TOL
     return result(
-        name, "drip_cert.bounds.l1drac_appendix vs (A.13)-(A.19), (25); Prop. A.1",
-        holds=bool(ok), residual=max(worst_eq, worst_mono),
-        detail=(f"max rel difference to the independent transcription {worst_eq:.1e}; max "
-                f"relative decrease when xi doubles {worst_mono:.1e}"),
+        name,
+        "drip_cert.bounds.l1drac_appendix vs (A.13)-(A.19), (25); Prop. A.1",
+        holds=bool(ok),
+        residual=max(worst_eq, worst_mono),
+        detail=(
+            f"max rel difference to the independent transcription {worst_eq:.1e}; max "
+            f"relative decrease when xi doubles {worst_mono:.1e}"
+        ),
     )
 
 
@@ -181,8 +217,9 @@ def check_impl_markov(ctx: Context) -> CheckResult:
     from drip_cert.bounds.l1drac import kappa_markov, p_for_delta
 
     rng = ctx.rng
-    deltas = np.concatenate([np.exp(-rng.uniform(0, 30, ctx.count(5000, 500))),
-                             np.exp(-2.0 * np.arange(1, 15))])
+    deltas = np.concatenate(
+        [np.exp(-rng.uniform(0, 30, ctx.count(5000, 500))), np.exp(-2.0 * np.arange(1, 15))]
+    )
     worst = -np.inf
     for d in deltas:
         if not 0 < d < 1:
@@ -191,7 +228,9 @@ def check_impl_markov(ctx: Context) -> CheckResult:
         k = kappa_markov(1.0, p, float(d))
         worst = max(worst, (k - math.e) / math.e, abs(k ** (-2 * p) - d) / d - KAPPA_REL_TOL)
     return result(
-        name, "drip_cert.bounds.l1drac p_for_delta / kappa_markov",
-        holds=bool(worst <= KAPPA_REL_TOL), residual=worst,
+        name,
+        "drip_cert.bounds.l1drac p_for_delta / kappa_markov",
+        holds=bool(worst <= KAPPA_REL_TOL),
+        residual=worst,
         detail=f"{deltas.size} deltas: max of (kappa - e rho)/(e rho) and tail error {worst:.1e}",
     )

@@ -49,8 +49,10 @@ def check_adaptation_gain(ctx: Context) -> CheckResult:
         E = expm(A * Ts)
         Phi_m = np.linalg.solve(A, E - np.eye(n))
         law = -np.linalg.solve(Phi_m, E)
-        worst_mat = max(worst_mat, float(np.max(np.abs(law - gain(lam_s, Ts) * np.eye(n))))
-                        / abs(gain(lam_s, Ts)))
+        worst_mat = max(
+            worst_mat,
+            float(np.max(np.abs(law - gain(lam_s, Ts) * np.eye(n)))) / abs(gain(lam_s, Ts)),
+        )
         # one period of x_tilde' = A x_tilde + sigma_hat - sigma, general Hurwitz A half the time
         if k % 2 == 1:
             M = rng.normal(size=(n, n))
@@ -60,11 +62,20 @@ def check_adaptation_gain(ctx: Context) -> CheckResult:
         x0 = rng.normal(size=n)
         sigma = rng.normal(size=n) * float(rng.choice([0.0, 1.0]))
         sig_hat = -np.linalg.solve(Phi_m, E @ x0)
-        sol = solve_ivp(lambda t, x, A=A, s=sig_hat - sigma: A @ x + s, (0.0, Ts), x0,
-                        method="DOP853", rtol=1e-11, atol=1e-14)
+        sol = solve_ivp(
+            lambda t, x, A=A, s=sig_hat - sigma: A @ x + s,
+            (0.0, Ts),
+            x0,
+            method="DOP853",
+            rtol=1e-11,
+            atol=1e-14,
+        )
         target = -Phi_m @ sigma
-        worst_ode = max(worst_ode, float(np.linalg.norm(sol.y[:, -1] - target))
-                        / (np.linalg.norm(x0) + np.linalg.norm(target)))
+        worst_ode = max(
+            worst_ode,
+            float(np.linalg.norm(sol.y[:, -1] - target))
+            / (np.linalg.norm(x0) + np.linalg.norm(target)),
+        )
     ok = sym_ok and worst_mat <= MATRIX_REL_TOL and worst_ode <= ODE_REL_TOL
     return result(
         name,

@@ -131,9 +131,18 @@ def check_monotone(ctx: Context) -> CheckResult:
 def _constants(omega: int, lam_s: int, p: int = 2, zero: tuple[str, ...] = ()):
     vals = {SYM[k]: sp.Rational(i % 5 + 1, 3) for i, k in enumerate(CONSTANTS)}
     _, pp, ppp = frak_p(p)
-    vals.update({SYM["pp"]: pp, SYM["ppp"]: ppp, SYM["lam"]: sp.Integer(2),
-                 SYM["lam_s"]: sp.Integer(lam_s), SYM["omega"]: sp.Integer(omega),
-                 SYM["xi"]: sp.Integer(3), SYM["xi1"]: sp.Integer(3), SYM["xi2"]: sp.Integer(1)})
+    vals.update(
+        {
+            SYM["pp"]: pp,
+            SYM["ppp"]: ppp,
+            SYM["lam"]: sp.Integer(2),
+            SYM["lam_s"]: sp.Integer(lam_s),
+            SYM["omega"]: sp.Integer(omega),
+            SYM["xi"]: sp.Integer(3),
+            SYM["xi1"]: sp.Integer(3),
+            SYM["xi2"]: sp.Integer(1),
+        }
+    )
     vals.update({SYM[k]: sp.Integer(0) for k in zero})
     return vals
 
@@ -164,8 +173,17 @@ def check_A21(ctx: Context) -> CheckResult:
     for omega, lam_s in cases:
         vals = _constants(omega, lam_s)
         maps = ts_maps(_resolver(vals))
-        keys = ["U2p", "U3p", "Utilde_minus", "U_minus", "Delta_mu1", "Delta_mu2", "Delta_mu3",
-                "Delta_sigma2", "Delta_sigma3"]
+        keys = [
+            "U2p",
+            "U3p",
+            "Utilde_minus",
+            "U_minus",
+            "Delta_mu1",
+            "Delta_mu2",
+            "Delta_mu3",
+            "Delta_sigma2",
+            "Delta_sigma3",
+        ]
         if not ctx.quick:  # the slow ones (tens of seconds each), full run only
             keys += ["Delta_sigma1", "U1p"]
         for key in keys:
@@ -238,49 +256,75 @@ def check_remarks(ctx: Context) -> CheckResult:
     """Gamma_r = O(rho^{3/2}) and O(1) in omega; Theta/|2l-w| = O(w^-1/2), O(1/w) w/o diffusion."""
     name = "l1drac.remarks_scalings"
     lam, w, rho, Ds, rho_a = sp.symbols("lambda omega rho_r Delta_star rho_a", positive=True)
-    D = {k: sp.Symbol(k, positive=True) for k in (
-        "c1 c2 c3 c4 cc1 cc2 cc3 cc4 o1 o2 o3 o4 o5 o6 o7 o8 x1 x2 x3 x4 x5 a1 a2 a3 "
-        "A_cc1 A_o1 A_o2 A_o3 A_o4 A_x1 A_x2 A_x3 A_x4 A_a2 A_a3").split()}
+    D = {
+        k: sp.Symbol(k, positive=True)
+        for k in (
+            "c1 c2 c3 c4 cc1 cc2 cc3 cc4 o1 o2 o3 o4 o5 o6 o7 o8 x1 x2 x3 x4 x5 a1 a2 a3 "
+            "A_cc1 A_o1 A_o2 A_o3 A_o4 A_x1 A_x2 A_x3 A_x4 A_a2 A_a3"
+        ).split()
+    }
     den = w - 2 * lam  # omega -> oo: |2 lambda - omega| = omega - 2 lambda
     R = rho + Ds
-    gamma_r = (D["c1"] / (2 * lam) + w * D["c4"] / den
-               + (D["cc1"] / (2 * lam) + w * D["cc4"] / den) * sp.sqrt(R)
-               + (D["o1"] / (2 * lam) + w * D["o8"] / den) * R
-               + (D["o2"] / (2 * lam) + D["o3"] / (2 * sp.sqrt(lam))
-                  + D["a1"] * Ds / (2 * lam)) * rho
-               + D["x1"] / (2 * sp.sqrt(lam)) * R ** sp.Rational(3, 2))  # (18b)
-    theta_r = (D["c2"] + sp.sqrt(w) * D["c3"] + (D["cc2"] + sp.sqrt(w) * D["cc3"]) * sp.sqrt(R)
-               + (D["o4"] + sp.sqrt(w) * D["o6"]) * R + (D["o5"] + sp.sqrt(w) * D["o7"]) * rho
-               + ((D["x2"] + sp.sqrt(w) * D["x4"]) * R + (D["x3"] + sp.sqrt(w) * D["x5"]) * rho)
-               * sp.sqrt(R) + (D["a2"] * R + D["a3"] * rho) * R)  # (22)
+    gamma_r = (
+        D["c1"] / (2 * lam)
+        + w * D["c4"] / den
+        + (D["cc1"] / (2 * lam) + w * D["cc4"] / den) * sp.sqrt(R)
+        + (D["o1"] / (2 * lam) + w * D["o8"] / den) * R
+        + (D["o2"] / (2 * lam) + D["o3"] / (2 * sp.sqrt(lam)) + D["a1"] * Ds / (2 * lam)) * rho
+        + D["x1"] / (2 * sp.sqrt(lam)) * R ** sp.Rational(3, 2)
+    )  # (18b)
+    theta_r = (
+        D["c2"]
+        + sp.sqrt(w) * D["c3"]
+        + (D["cc2"] + sp.sqrt(w) * D["cc3"]) * sp.sqrt(R)
+        + (D["o4"] + sp.sqrt(w) * D["o6"]) * R
+        + (D["o5"] + sp.sqrt(w) * D["o7"]) * rho
+        + ((D["x2"] + sp.sqrt(w) * D["x4"]) * R + (D["x3"] + sp.sqrt(w) * D["x5"]) * rho)
+        * sp.sqrt(R)
+        + (D["a2"] * R + D["a3"] * rho) * R
+    )  # (22)
     rpp = rho_a + 2 * R
-    theta_a = ((sp.sqrt(w) * D["A_cc1"] + sp.sqrt(w) * D["A_x3"] * rpp
-                + (D["A_x2"] + sp.sqrt(w) * D["A_x4"]) * rho_a) * sp.sqrt(rho_a)
-               + (D["A_o2"] + sp.sqrt(w) * D["A_o3"] + D["A_a2"] * rpp + D["A_a3"] * rho_a)
-               * rho_a)  # (23)
+    theta_a = (
+        sp.sqrt(w) * D["A_cc1"]
+        + sp.sqrt(w) * D["A_x3"] * rpp
+        + (D["A_x2"] + sp.sqrt(w) * D["A_x4"]) * rho_a
+    ) * sp.sqrt(rho_a) + (
+        D["A_o2"] + sp.sqrt(w) * D["A_o3"] + D["A_a2"] * rpp + D["A_a3"] * rho_a
+    ) * rho_a  # (23)
     l_rho = sp.limit(gamma_r / rho ** sp.Rational(3, 2), rho, sp.oo)
     l_w = sp.limit(gamma_r, w, sp.oo)
     l_tr = sp.limit(sp.sqrt(w) * theta_r / den, w, sp.oo)
     l_ta = sp.limit(sp.sqrt(w) * theta_a / den, w, sp.oo)
     # without diffusion, the sqrt(omega) coefficients of Appendix A.2 vanish (A.3)-(A.11):
     pp = sp.Symbol("pp", positive=True)
-    S = {k: sp.Symbol(k, nonnegative=True) for k in (
-        "Dpp Dsp Dg Dmup h1 h2 h3 h4 Lpp Lsp h2t h3t h4t Lmup".split())}
+    S = {
+        k: sp.Symbol(k, nonnegative=True)
+        for k in ("Dpp Dsp Dg Dmup h1 h2 h3 h4 Lpp Lsp h2t h3t h4t Lmup".split())
+    }
     sl = sp.sqrt(lam)
     sqrt_w_coeffs = [
         pp / sl * (S["Dpp"] + S["Dsp"]) * (S["h1"] + 2 * S["Dg"] ** 2 * S["Dmup"] / sl),  # o3
-        pp / sl * ((S["Dpp"] + S["Dsp"]) * S["h2"]
-                   + S["Dsp"] * (S["h1"] + 2 * S["Dg"] ** 2 * S["Dmup"] / sl)),  # cc3
-        pp / sl * ((S["Dpp"] + S["Dsp"]) * (S["h3"] + 2 * S["Dg"] ** 2 * S["Dmup"] / sl)
-                   + S["Dsp"] * S["h2"]),  # odot6
+        pp
+        / sl
+        * (
+            (S["Dpp"] + S["Dsp"]) * S["h2"]
+            + S["Dsp"] * (S["h1"] + 2 * S["Dg"] ** 2 * S["Dmup"] / sl)
+        ),  # cc3
+        pp
+        / sl
+        * (
+            (S["Dpp"] + S["Dsp"]) * (S["h3"] + 2 * S["Dg"] ** 2 * S["Dmup"] / sl)
+            + S["Dsp"] * S["h2"]
+        ),  # odot6
         pp * (S["Dpp"] + S["Dsp"]) * (S["h4"] / sl + 2 * S["Dg"]),  # odot7
         pp * S["Dsp"] / sl * (S["h3"] + 2 * S["Dg"] ** 2 * S["Dmup"] / sl),  # otimes4
         pp * S["Dsp"] * (S["h4"] / sl + 2 * S["Dg"]),  # otimes5
         pp / sl * (S["Lpp"] + S["Lsp"]) * S["h2t"],  # true: circledcirc1 (hat Delta_1)
         pp / sl * (S["Lpp"] + S["Lsp"]) * S["h2t"],  # true: odot3 (hat Delta_2)
         pp / sl * (S["Lpp"] + S["Lsp"]) * S["h3t"],  # true: otimes3
-        pp * (S["Lpp"] + S["Lsp"]) * (S["h4t"] / sl + 2 * S["Dg"] * (1 + S["Dg"] / lam
-                                                                    * S["Lmup"])),  # otimes4
+        pp
+        * (S["Lpp"] + S["Lsp"])
+        * (S["h4t"] / sl + 2 * S["Dg"] * (1 + S["Dg"] / lam * S["Lmup"])),  # otimes4
     ]
     nodiff = {S[k]: 0 for k in ("Dpp", "Dsp", "Lpp", "Lsp")}
     vanish = all(sp.simplify(c.subs(nodiff)) == 0 for c in sqrt_w_coeffs)

@@ -66,6 +66,7 @@ def check_lp_inclusion(ctx: Context) -> CheckResult:
     # adversarial: three-point laws, maximise E|Z| / ||Z||_{2p} (sup is 1, at constants)
     best = 0.0
     for pp in (1, 4):
+
         def neg(zz, pp=pp):
             vals = np.exp(zz[:3])
             wts = np.exp(zz[3:]) / np.exp(zz[3:]).sum()
@@ -133,8 +134,8 @@ def check_markov(ctx: Context, p_factor: float = 1.0) -> CheckResult:
 
 @register("l1drac.integer_p", LABEL + ", integer-p variant for general delta")
 def check_integer_p(ctx: Context) -> CheckResult:
-    """``p = max(1, ceil(log(1/delta)/2))``: ``kappa = rho delta^{-1/(2p)} <= e rho``, tail delta.
-    """
+    """``p = max(1, ceil(log(1/delta)/2))``: ``kappa = rho delta^{-1/(2p)} <= e rho``, tail
+    delta."""
     name = "l1drac.integer_p"
     dl, rho = sp.symbols("delta rho", positive=True)
     p = sp.symbols("p", positive=True, integer=True)
@@ -144,12 +145,14 @@ def check_integer_p(ctx: Context) -> CheckResult:
     log_ratio = sp.simplify(sp.expand_log(sp.log(kappa / rho), force=True))
     sym_ok = sp.simplify(tail - dl) == 0 and sp.simplify(log_ratio - sp.log(1 / dl) / (2 * p)) == 0
     rng = ctx.rng
-    deltas = np.concatenate([
-        np.exp(-rng.uniform(0, 40, size=ctx.count(20000, 2000))),
-        np.exp(-2.0 * np.arange(1, 20)),
-        np.nextafter(np.exp(-2.0 * np.arange(1, 20)), 0),
-        np.nextafter(np.exp(-2.0 * np.arange(1, 20)), 1),
-    ])
+    deltas = np.concatenate(
+        [
+            np.exp(-rng.uniform(0, 40, size=ctx.count(20000, 2000))),
+            np.exp(-2.0 * np.arange(1, 20)),
+            np.nextafter(np.exp(-2.0 * np.arange(1, 20)), 0),
+            np.nextafter(np.exp(-2.0 * np.arange(1, 20)), 1),
+        ]
+    )
     deltas = deltas[(deltas > 0) & (deltas < 1)]
     worst = -np.inf
     for d in deltas:

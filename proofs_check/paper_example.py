@@ -40,8 +40,7 @@ def delta_mu_sigma_closed_form() -> tuple[sp.Expr, sp.Expr, sp.Expr, sp.Expr]:
     fs = 4 * (a + b * s) ** 2 / sp.sqrt(1 + s**4)  # s = sqrt(r)
     num = sp.numer(sp.together(sp.diff(fs, s)))
     crit_s = [c for c in sp.solve(num, s) if c.is_positive]
-    cands_s = [sp.simplify(fs.subs(s, c)) for c in crit_s] + [fs.subs(s, 0),
-                                                             sp.limit(fs, s, sp.oo)]
+    cands_s = [sp.simplify(fs.subs(s, c)) for c in crit_s] + [fs.subs(s, 0), sp.limit(fs, s, sp.oo)]
     ds2 = sp.Max(*cands_s)
     return dmu2, crit_mu[0], sp.simplify(ds2), crit_s[0] ** 2
 
@@ -51,8 +50,11 @@ def check_uncertainty_constants(ctx: Context) -> CheckResult:
     """Closed-form smallest constants, confirmed on random X in R^4 and by a scalar search."""
     name = "example.uncertainty_constants"
     dmu2, rmu, ds2, rs = delta_mu_sigma_closed_form()
-    closed_ok = (sp.simplify(dmu2 - sp.Rational(1, 20)) == 0 and rmu == sp.Rational(1, 2)
-                 and sp.simplify(rs - 2 ** sp.Rational(-2, 3)) == 0)
+    closed_ok = (
+        sp.simplify(dmu2 - sp.Rational(1, 20)) == 0
+        and rmu == sp.Rational(1, 2)
+        and sp.simplify(rs - 2 ** sp.Rational(-2, 3)) == 0
+    )
     dmu2_f, ds2_f = float(dmu2), float(ds2)
     rng = ctx.rng
     n = ctx.count(200_000, 20_000)
@@ -65,10 +67,18 @@ def check_uncertainty_constants(ctx: Context) -> CheckResult:
     ratio_s = lam_sig_f2 / np.sqrt(1 + r**2)
     viol = max(float(np.max(ratio_mu) / dmu2_f - 1), float(np.max(ratio_s) / ds2_f - 1))
     # the supremum is attained (the constants are the smallest): bounded scalar searches
-    mmu = -minimize_scalar(lambda t: -4 * (0.1 + 0.05 * t) ** 2 / (1 + t**2), bounds=(0, 10),
-                           method="bounded", options={"xatol": 1e-12}).fun
-    ms = -minimize_scalar(lambda t: -4 * (0.1 + 0.05 * np.sqrt(t)) ** 2 / np.sqrt(1 + t**2),
-                          bounds=(0, 10), method="bounded", options={"xatol": 1e-12}).fun
+    mmu = -minimize_scalar(
+        lambda t: -4 * (0.1 + 0.05 * t) ** 2 / (1 + t**2),
+        bounds=(0, 10),
+        method="bounded",
+        options={"xatol": 1e-12},
+    ).fun
+    ms = -minimize_scalar(
+        lambda t: -4 * (0.1 + 0.05 * np.sqrt(t)) ** 2 / np.sqrt(1 + t**2),
+        bounds=(0, 10),
+        method="bounded",
+        options={"xatol": 1e-12},
+    ).fun
     attain = max(abs(mmu / dmu2_f - 1), abs(ms / ds2_f - 1))
     op_reading = float(sp.sqrt(dmu2 / 4))  # operator norm of the printed matrix c I_4
     ok = closed_ok and viol <= SUP_REL_TOL and attain <= ATTAIN_REL_TOL

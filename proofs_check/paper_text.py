@@ -17,13 +17,15 @@ from pathlib import Path
 from proofs_check._core import CheckResult, Context, register, result
 
 _REPO = Path(__file__).resolve().parent.parent
-_CANDIDATES = (_REPO.parent / "shared" / "papers" / "drip_paper.tex",
-               _REPO / "shared" / "papers" / "drip_paper.tex")
+_CANDIDATES = (
+    _REPO.parent / "shared" / "papers" / "drip_paper.tex",
+    _REPO / "shared" / "papers" / "drip_paper.tex",
+)
 
 
 def _source() -> str | None:
     env = os.environ.get("DRIP_PAPER_TEX")
-    for path in ([Path(env)] if env else list(_CANDIDATES)):
+    for path in [Path(env)] if env else list(_CANDIDATES):
         try:
             return path.read_text(encoding="utf-8")
         except OSError:
@@ -34,12 +36,22 @@ def _source() -> str | None:
 def _textual(name: str, label: str, erratum: str, patterns: list[str], what: str) -> CheckResult:
     src = _source()
     if src is None:
-        return result(name, label, holds=True, residual=float("nan"), erratum=erratum,
-                      detail=f"{what} (paper source not found: not re-verified)")
+        return result(
+            name,
+            label,
+            holds=True,
+            residual=float("nan"),
+            erratum=erratum,
+            detail=f"{what} (paper source not found: not re-verified)",
+        )
     flat = re.sub(r"\s+", " ", src)
     missing = [p for p in patterns if re.search(p, flat) is None]
     return result(
-        name, label, holds=not missing, residual=float(len(missing)), erratum=erratum,
+        name,
+        label,
+        holds=not missing,
+        residual=float(len(missing)),
+        erratum=erratum,
         detail=what if not missing else f"recorded text not found in the source: {missing}",
     )
 
@@ -48,7 +60,9 @@ def _textual(name: str, label: str, erratum: str, patterns: list[str], what: str
 def check_loss_index(ctx: Context) -> CheckResult:
     """The TaSIL loss takes ``max_{s in partition}`` of ``||Psi_t||``: s is not used."""
     return _textual(
-        "text.tasil_loss_index", "DRIP eq. (LossTaSIL)", "E2",
+        "text.tasil_loss_index",
+        "DRIP eq. (LossTaSIL)",
+        "E2",
         [r"\\max_\{s \\in \\partition\{k\}\{T\}/\\\{T\\\}\} \\norm\{ \\Psi\^\{\\pi\^\\star\}_t"],
         "loss maximises over s but indexes Psi_t (and nabla_x Psi_t); read Psi_s",
     )
@@ -58,9 +72,13 @@ def check_loss_index(ctx: Context) -> CheckResult:
 def check_uncertainty_ref(ctx: Context) -> CheckResult:
     """The uncertainty-IG is said to be 'defined in (policy-IG)'."""
     return _textual(
-        "text.uncertainty_ig_reference", "DRIP Sec. UncertaintyIG, first sentence", "E3",
-        [r"uncertainty induced imitation gap \(uncertainty-IG\), defined in~\\eqref\{eqn:"
-         r"Decomposition:IG:Policy\}"],
+        "text.uncertainty_ig_reference",
+        "DRIP Sec. UncertaintyIG, first sentence",
+        "E3",
+        [
+            r"uncertainty induced imitation gap \(uncertainty-IG\), defined in~\\eqref\{eqn:"
+            r"Decomposition:IG:Policy\}"
+        ],
         "uncertainty-IG referred to eqn:Decomposition:IG:Policy; should be ...:Uncertainty",
     )
 
@@ -69,7 +87,9 @@ def check_uncertainty_ref(ctx: Context) -> CheckResult:
 def check_corollary_symbols(ctx: Context) -> CheckResult:
     """The bound after the corollary uses kappa, lambda_kappa for theta, lambda_theta."""
     return _textual(
-        "text.corollary_symbols", "DRIP text after Cor. 1 (corol:DiscreteDeltaISS)", "E6",
+        "text.corollary_symbols",
+        "DRIP text after Cor. 1 (corol:DiscreteDeltaISS)",
+        "E6",
         [r"\\frac\{1\}\{\\sqrt\{\\kappa \\lambda_\\kappa\}\}"],
         "kappa, lambda_kappa are theta, lambda_theta of Prop. 1 (kappa is later the Markov radius)",
     )
@@ -79,9 +99,13 @@ def check_corollary_symbols(ctx: Context) -> CheckResult:
 def check_expert_ode(ctx: Context) -> CheckResult:
     """The nominal ODEs are written ``d x_t = fbar(...)`` without ``dt`` (same family as E1)."""
     return _textual(
-        "text.expert_ode", "DRIP eq. (ExpertProcess), (TaSILProcess)", "E1",
-        [r"d\\xstart\{t\} = \\fbar\{t,\\xstart\{t\}, \\pistar\{\\xstart\{t\}\}\}, \\quad",
-         r"y_t\^\\star = \\fbar\{t,y_t\^\\star, \\pistar\{y_t\^\\star\} \+ \\varsigma_t\}"],
+        "text.expert_ode",
+        "DRIP eq. (ExpertProcess), (TaSILProcess)",
+        "E1",
+        [
+            r"d\\xstart\{t\} = \\fbar\{t,\\xstart\{t\}, \\pistar\{\\xstart\{t\}\}\}, \\quad",
+            r"y_t\^\\star = \\fbar\{t,y_t\^\\star, \\pistar\{y_t\^\\star\} \+ \\varsigma_t\}",
+        ],
         "d x = fbar(...) without dt, and Prop. 1's y_t = fbar(...) without the derivative",
     )
 
@@ -90,7 +114,9 @@ def check_expert_ode(ctx: Context) -> CheckResult:
 def check_noninteger_p(ctx: Context) -> CheckResult:
     """rho_L1 is evaluated at log sqrt(1/delta), an integer only for delta = e^{-2k}."""
     return _textual(
-        "text.l1_noninteger_p", "DRIP Thm. L1DRAC (eqn:result:2)", "E9",
+        "text.l1_noninteger_p",
+        "DRIP Thm. L1DRAC (eqn:result:2)",
+        "E9",
         [r"e \\cdot \\rho_\{\\mathcal\{L\}_1\}\\left\(\\log \\sqrt\{ \\frac\{1\}\{\\delta\} \}"],
         "rho_L1(p) exists for integer p only; the valid radius is l1drac.integer_p's",
     )

@@ -59,8 +59,16 @@ class GapInstance:
     def scaled(self, k: float) -> GapInstance:
         """Delta multiplied by k (h0, h1, L all scale by k)."""
         return GapInstance(
-            self.A, self.c, self.W, self.B, k * self.a0, k * self.K, k * self.s, self.V,
-            self.gamma0, k * self.L,
+            self.A,
+            self.c,
+            self.W,
+            self.B,
+            k * self.a0,
+            k * self.K,
+            k * self.s,
+            self.V,
+            self.gamma0,
+            k * self.L,
         )
 
 
@@ -122,8 +130,16 @@ def random_instance(rng: np.random.Generator, *, dummy2: bool) -> GapInstance:
     s = rng.normal(size=m) * float(rng.choice([0.0, 1.0]))
     L = float(np.max(np.abs(s)) * np.linalg.norm(V, 2) ** 2) if s.any() else 0.0
     return GapInstance(
-        A=A, c=c, W=W, B=B, a0=rng.normal(size=m), K=rng.normal(size=(m, n)), s=s, V=V,
-        gamma0=gamma0, L=L,
+        A=A,
+        c=c,
+        W=W,
+        B=B,
+        a0=rng.normal(size=m),
+        K=rng.normal(size=(m, n)),
+        s=s,
+        V=V,
+        gamma0=gamma0,
+        L=L,
     )
 
 
@@ -234,7 +250,9 @@ def check_gap_adversarial(ctx: Context, sharp_factor: float = 1.0) -> CheckResul
     starts += [rng.normal(size=7) * [2, 1, 1, 1, 1, 2, 2] for _ in range(n_starts - 1)]
     for z0 in starts:
         r = minimize(
-            lambda z: -_scalar_ratio(z, T, sharp_factor), z0, method="Nelder-Mead",
+            lambda z: -_scalar_ratio(z, T, sharp_factor),
+            z0,
+            method="Nelder-Mead",
             options={"maxiter": 800, "xatol": 1e-9, "fatol": 1e-12},
         )
         best = max(best, -float(r.fun))

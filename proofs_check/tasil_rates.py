@@ -20,8 +20,9 @@ from proofs_check._core import CheckResult, Context, register, result
 
 LABEL = "DRIP Thm. TaSIL (thm:TaSIL), rates of rho_TaSIL"
 
-g0, b0, q, B, L, n, delta, tau0 = sp.symbols("gamma_0 b_0 q B_theta L_theta n delta tau_0",
-                                             positive=True)
+g0, b0, q, B, L, n, delta, tau0 = sp.symbols(
+    "gamma_0 b_0 q B_theta L_theta n delta tau_0", positive=True
+)
 
 
 def R0(n_, delta_, tau=0):
@@ -43,8 +44,11 @@ def check_rate_n(ctx: Context) -> CheckResult:
     expected = 6 * g0 * b0 * q / delta
     lim_faster = sp.limit(rho * n / sp.log(n) ** sp.Rational(1, 2), n, sp.oo)  # not o(...)
     lim_tau = sp.simplify(sp.limit(rho_tasil(n, delta, tau0), n, sp.oo))
-    ok = sp.simplify(lim - expected) == 0 and lim_faster == sp.oo and sp.simplify(
-        lim_tau - 6 * g0 * tau0 / delta) == 0
+    ok = (
+        sp.simplify(lim - expected) == 0
+        and lim_faster == sp.oo
+        and sp.simplify(lim_tau - 6 * g0 * tau0 / delta) == 0
+    )
     return result(
         name,
         LABEL + ", O(log n / n) as n -> oo",
@@ -65,8 +69,9 @@ def check_rate_delta(ctx: Context) -> CheckResult:
     lim_1 = sp.limit(rho * delta, delta, 0, "+")
     lim_log = sp.simplify(sp.limit(rho * delta / sp.log(1 / delta), delta, 0, "+"))
     expected = 6 * g0 * b0 / n
-    lim_log_tau = sp.simplify(sp.limit(rho_tasil(n, delta, tau0) * delta / sp.log(1 / delta),
-                                       delta, 0, "+"))
+    lim_log_tau = sp.simplify(
+        sp.limit(rho_tasil(n, delta, tau0) * delta / sp.log(1 / delta), delta, 0, "+")
+    )
     ok = (
         lim_1 == sp.oo
         and sp.simplify(lim_log - expected) == 0

@@ -27,9 +27,11 @@ def test_check_spec_ok(capsys):
 
 def test_check_spec_bad_input_exit_2_no_traceback(tmp_path, capsys):
     p = tmp_path / "bad.toml"
-    p.write_text('[system]\nname = "x"\nstates = ["x1"]\nhorizon = 1.0\n[dynamics]\n'
-                 'f = ["__import__(\'os\')"]\ng = [["1"]]\n[policy]\nexpert = ["-x1"]\n'
-                 '[initial]\nsupport = [[0.0, 1.0]]\n')
+    p.write_text(
+        '[system]\nname = "x"\nstates = ["x1"]\nhorizon = 1.0\n[dynamics]\n'
+        'f = ["__import__(\'os\')"]\ng = [["1"]]\n[policy]\nexpert = ["-x1"]\n'
+        "[initial]\nsupport = [[0.0, 1.0]]\n"
+    )
     code, out, err = run(capsys, "check-spec", str(p))
     assert code == 2
     assert "dynamics.f[0]" in err and str(p) in err
@@ -86,8 +88,9 @@ def test_certify_markdown(capsys):
 
 
 def test_design_l1_calculator(capsys):
-    code, out, _ = run(capsys, "design-l1", "examples/l1drac_constants/double_integrator.toml",
-                       "--json")
+    code, out, _ = run(
+        capsys, "design-l1", "examples/l1drac_constants/double_integrator.toml", "--json"
+    )
     assert code == 0
     d = json.loads(out)
     assert d["feasible"] is True

@@ -21,8 +21,9 @@ VALUE_RTOL = 1e-12  # exact rationals vs float arithmetic on O(1) values: roundi
 
 
 def parse(text, blocks=None):
-    return parse_expression(text, field="dynamics.f[0]", scalars=SCALARS, vector=(X1, X2),
-                            blocks=blocks)
+    return parse_expression(
+        text, field="dynamics.f[0]", scalars=SCALARS, vector=(X1, X2), blocks=blocks
+    )
 
 
 def test_arithmetic_and_functions_become_exact_sympy():
@@ -166,8 +167,16 @@ def test_whitelisted_expressions_parse_and_match_python_semantics(text):
     import math
 
     e = parse(text)
-    env = {"x1": 0.3, "x2": -0.7, "t": 1.1, "sin": math.sin, "cos": math.cos,
-           "tanh": math.tanh, "exp": math.exp, "abs": abs}
+    env = {
+        "x1": 0.3,
+        "x2": -0.7,
+        "t": 1.1,
+        "sin": math.sin,
+        "cos": math.cos,
+        "tanh": math.tanh,
+        "exp": math.exp,
+        "abs": abs,
+    }
     # the reference evaluation is of our own generated grammar, not of user input
     ref = eval(text, {"__builtins__": {}}, env)  # noqa: S307
     val = float(e.subs({X1: 0.3, X2: -0.7, T: 1.1}))

@@ -33,8 +33,8 @@ def test_apply_jax_equals_numpy_and_product_form(sizes, output_activation):
     np.testing.assert_allclose(np.asarray(prod), ref, rtol=0, atol=SUM_ORDER_TOL)
     # one unbatched path and its Jacobian agree with the product form too
     j1 = jax.jacfwd(mlp.apply_jax)(jnp.asarray(x[0]))
-    j2 = jax.jacfwd(
-        lambda z: apply_params(params, z, mlp.activation, output_activation, xp=jnp)
-    )(jnp.asarray(x[0]))
+    j2 = jax.jacfwd(lambda z: apply_params(params, z, mlp.activation, output_activation, xp=jnp))(
+        jnp.asarray(x[0])
+    )
     assert j1.shape == (sizes[-1], sizes[0])
     np.testing.assert_allclose(np.asarray(j1), np.asarray(j2), rtol=0, atol=SUM_ORDER_TOL)

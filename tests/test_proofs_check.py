@@ -38,11 +38,22 @@ def test_quick_suite_passes_or_documents_errata(quick_results):
 
 def test_expected_errata_are_found(quick_results):
     by_name = {r.name: r for r in quick_results}
-    for name in ("iss.perturbed_ode_statement", "tasil.rho_rate_delta", "l1drac.Ts_rate",
-                 "example.uncertainty_constants", "example.expert_contraction"):
+    for name in (
+        "iss.perturbed_ode_statement",
+        "tasil.rho_rate_delta",
+        "l1drac.Ts_rate",
+        "example.uncertainty_constants",
+        "example.expert_contraction",
+    ):
         assert by_name[name].verdict is Verdict.ERRATUM, name
-    for name in ("iss.young_step", "iss.bound_random_systems", "iss.tight_never_looser",
-                 "decomposition.tig", "l1drac.markov_step", "l1drac.propA1_monotone"):
+    for name in (
+        "iss.young_step",
+        "iss.bound_random_systems",
+        "iss.tight_never_looser",
+        "decomposition.tig",
+        "l1drac.markov_step",
+        "l1drac.propA1_monotone",
+    ):
         assert by_name[name].verdict is Verdict.PASS, name
 
 

@@ -68,26 +68,53 @@ def test_paper_example_loads_and_expert_cancels_h():
         ('f = ["x2", "-x1 - x2**3"]', 'f = ["x2", "-x1 - y"]', "dynamics.f[1]", "unknown symbol"),
         ('f = ["x2", "-x1 - x2**3"]', 'f = ["x2"]', "dynamics.f", "2 entries"),
         ('g = [["0"], ["1"]]', 'g = [["0"], ["x1"]]', "dynamics.g[1][0]", "depends on the state"),
-        ('g = [["0"], ["1"]]\n[policy]\nexpert = ["-x1 - 2*x2"]',
-         'g = [["1", "2"], ["2", "4"]]\n[policy]\nexpert = ["-x1", "-x2"]', "system.inputs",
-         "2 columns"),
+        (
+            'g = [["0"], ["1"]]\n[policy]\nexpert = ["-x1 - 2*x2"]',
+            'g = [["1", "2"], ["2", "4"]]\n[policy]\nexpert = ["-x1", "-x2"]',
+            "system.inputs",
+            "2 columns",
+        ),
         ('g = [["0"], ["1"]]', 'g = [["0"], ["0"]]', "dynamics.g", "rank 0"),
         ("horizon = 10.0", "horizon = -1.0", "system.horizon", "> 0"),
         ("horizon = 10.0", "horizon = 0", "system.horizon", "> 0"),
         ("horizon = 10.0", "horizon = nan", "system.horizon", "> 0"),
-        ("support = [[-1.0, 1.0], [-1.0, 1.0]]", "support = [[1.0, -1.0], [-1.0, 1.0]]",
-         "initial.support", "empty"),
-        ("support = [[-1.0, 1.0], [-1.0, 1.0]]", "support = [[-1.0, inf], [-1.0, 1.0]]",
-         "initial.support", "not finite"),
-        ("support = [[-1.0, 1.0], [-1.0, 1.0]]", "support = [[-1.0, 1.0]]", "initial.support",
-         "2 pairs"),
-        ('drift = ["0.1*sin(x1)", "0.1"]', 'drift = ["x1.real", "0.1"]', "uncertainty.drift[0]",
-         "not allowed"),
-        ('drift = ["0.1*sin(x1)", "0.1"]', 'drift = ["0.1*sin(x1)", "0.1"]\nDelta_mu = 0.3',
-         "uncertainty.Delta_mu", "not both"),
+        (
+            "support = [[-1.0, 1.0], [-1.0, 1.0]]",
+            "support = [[1.0, -1.0], [-1.0, 1.0]]",
+            "initial.support",
+            "empty",
+        ),
+        (
+            "support = [[-1.0, 1.0], [-1.0, 1.0]]",
+            "support = [[-1.0, inf], [-1.0, 1.0]]",
+            "initial.support",
+            "not finite",
+        ),
+        (
+            "support = [[-1.0, 1.0], [-1.0, 1.0]]",
+            "support = [[-1.0, 1.0]]",
+            "initial.support",
+            "2 pairs",
+        ),
+        (
+            'drift = ["0.1*sin(x1)", "0.1"]',
+            'drift = ["x1.real", "0.1"]',
+            "uncertainty.drift[0]",
+            "not allowed",
+        ),
+        (
+            'drift = ["0.1*sin(x1)", "0.1"]',
+            'drift = ["0.1*sin(x1)", "0.1"]\nDelta_mu = 0.3',
+            "uncertainty.Delta_mu",
+            "not both",
+        ),
         ("[uncertainty]", "[uncertainty]\nDelta_sigma = -1", "uncertainty.Delta_sigma", ">= 0"),
-        ('expert = ["-x1 - 2*x2"]', 'expert = ["-x1 - 2*t"]', "policy.expert[0]",
-         "unknown symbol 't'"),
+        (
+            'expert = ["-x1 - 2*x2"]',
+            'expert = ["-x1 - 2*t"]',
+            "policy.expert[0]",
+            "unknown symbol 't'",
+        ),
         ("[initial]", "[initals]", "initals", "unknown section"),
         ('name = "example"', 'name = "example"\ncolour = "red"', "system.colour", "unknown key"),
     ],
@@ -162,9 +189,11 @@ def test_weights_file_with_pickles_is_refused(tmp_path):
 
 
 def test_rank_deficient_g_says_the_rank(tmp_path):
-    text = MINIMAL.replace('inputs = ["u1"]\n', "").replace(
-        'g = [["0"], ["1"]]', 'g = [["1", "2"], ["2", "4"]]').replace(
-        'expert = ["-x1 - 2*x2"]', 'expert = ["-x1", "-x2"]')
+    text = (
+        MINIMAL.replace('inputs = ["u1"]\n', "")
+        .replace('g = [["0"], ["1"]]', 'g = [["1", "2"], ["2", "4"]]')
+        .replace('expert = ["-x1 - 2*x2"]', 'expert = ["-x1", "-x2"]')
+    )
     with pytest.raises(SpecError, match=r"rank 1 < m = 2") as info:
         load_spec(write(tmp_path, text))
     assert "dynamics.g" in str(info.value)

@@ -21,8 +21,15 @@ def test_reproduce_paper_4d_quick(tmp_path, monkeypatch, capsys):
     code = main(["reproduce", "paper-4d", "--quick", "--out", str(out), "--json"])
     rep = json.loads(capsys.readouterr().out)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["out"]
-    for name in ("report.md", "figure.png", "figure.svg", "certificate.json", "reproduce.json",
-                 "policy_tasil.npz", "policy_bc.npz"):
+    for name in (
+        "report.md",
+        "figure.png",
+        "figure.svg",
+        "certificate.json",
+        "reproduce.json",
+        "policy_tasil.npz",
+        "policy_bc.npz",
+    ):
         assert (out / name).is_file(), name
     claims = {c["case"]: c["holds"] for c in rep["claims"]}
     assert claims == {"(i)": True, "(ii)": True, "(iii)": True}
@@ -56,8 +63,21 @@ def test_gallery_quick_run(name, tmp_path):
 
 def test_train_command_writes_policy(tmp_path, capsys):
     out = tmp_path / "pol"
-    code = main(["train", "examples/unmatched_2d/unmatched_2d.toml", "--method", "bc",
-                 "--trajectories", "8", "--steps", "50", "--out", str(out), "--json"])
+    code = main(
+        [
+            "train",
+            "examples/unmatched_2d/unmatched_2d.toml",
+            "--method",
+            "bc",
+            "--trajectories",
+            "8",
+            "--steps",
+            "50",
+            "--out",
+            str(out),
+            "--json",
+        ]
+    )
     assert code == 0
     summary = json.loads(capsys.readouterr().out)
     assert (out / "policy.npz").is_file() and (out / "train.json").is_file()

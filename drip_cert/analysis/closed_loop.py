@@ -88,8 +88,11 @@ def mlp_output_bound(mlp: MLP) -> float:
     The last hidden layer outputs lie in ``[-1, 1]^w`` for tanh, so the affine output layer gives
     ``||W z + b|| <= || |W| 1 + |b| ||`` entrywise. (GELU is unbounded: ``inf``.)
     """
-    if mlp.activation != "tanh" or len(mlp.weights) < 2 or mlp.output_activation not in (
-            None, "identity", "tanh"):
+    if (
+        mlp.activation != "tanh"
+        or len(mlp.weights) < 2
+        or mlp.output_activation not in (None, "identity", "tanh")
+    ):
         return math.inf
     if mlp.output_activation == "tanh":
         return math.sqrt(mlp.out_dim)
@@ -109,8 +112,9 @@ class ClosedLoopConstants:
         return (self.Delta_f, self.L_f, self.Delta_star)
 
 
-def closed_loop_constants(s: System, which: str, lam: Quantity,
-                          global_rate: bool) -> ClosedLoopConstants:
+def closed_loop_constants(
+    s: System, which: str, lam: Quantity, global_rate: bool
+) -> ClosedLoopConstants:
     """Bound ``Delta_f``, ``L_f``, ``Delta_star`` of the closed loop under ``which`` policy.
 
     Parameters
@@ -143,18 +147,36 @@ def closed_loop_constants(s: System, which: str, lam: Quantity,
             beta += nC * mlp_output_bound(mlp)
             lip += nC * lipschitz_bound(mlp).value
         up = 1 + 1e-12  # covers the rounding of the few float operations above
-        dF = Quantity("Delta_f", math.sqrt(nA**2 + beta**2) * up, How.SOUND, src_f,
-                      f"F = A a + c + sum C h(a): sqrt(||A||^2 + beta^2), ||A|| = {nA:.6g}, "
-                      f"beta = ||c|| + sum ||C|| sup||h|| = {beta:.6g}")
-        lF = Quantity("L_f", lip * up, How.SOUND, src_l,
-                      "||A|| + sum ||C|| Lip(h) (spectral-norm product bound of each MLP)")
-        F0 = float(np.linalg.norm(dec.c + sum(C @ s.blocks[b].evaluate_np(np.zeros(s.n))
-                                               for b, C in dec.C.items())))
+        dF = Quantity(
+            "Delta_f",
+            math.sqrt(nA**2 + beta**2) * up,
+            How.SOUND,
+            src_f,
+            f"F = A a + c + sum C h(a): sqrt(||A||^2 + beta^2), ||A|| = {nA:.6g}, "
+            f"beta = ||c|| + sum ||C|| sup||h|| = {beta:.6g}",
+        )
+        lF = Quantity(
+            "L_f",
+            lip * up,
+            How.SOUND,
+            src_l,
+            "||A|| + sum ||C|| Lip(h) (spectral-norm product bound of each MLP)",
+        )
+        F0 = float(
+            np.linalg.norm(
+                dec.c + sum(C @ s.blocks[b].evaluate_np(np.zeros(s.n)) for b, C in dec.C.items())
+            )
+        )
         bound = r0 + F0 / lam.value
         how = How.SOUND if (global_rate and lam.how in (How.EXACT, How.SOUND)) else How.ESTIMATE
-        dS = Quantity("Delta_star", bound * up, how, src_s,
-                      f"max_box ||x0|| + ||F(0)||/lambda = {r0:.6g} + {F0:.6g}/{lam.value:.6g}"
-                      + ("" if how == How.SOUND else " (rate not global: estimate)"))
+        dS = Quantity(
+            "Delta_star",
+            bound * up,
+            how,
+            src_s,
+            f"max_box ||x0|| + ||F(0)||/lambda = {r0:.6g} + {F0:.6g}/{lam.value:.6g}"
+            + ("" if how == How.SOUND else " (rate not global: estimate)"),
+        )
         return ClosedLoopConstants(dF, lF, dS)
     # sampled estimates
     fn = batch_fn(s, sp.Matrix(F))
@@ -167,11 +189,18 @@ def closed_loop_constants(s: System, which: str, lam: Quantity,
     F0 = max(float(np.linalg.norm(fn(float(t), np.zeros((1, s.n)))[0])) for t in times)
     est = "sampled (spheres of radii up to 1e6): an estimate, not a bound"
     if math.isinf(D):
-        est = ("the sampled ratio ||F(a)|| / sqrt(1 + ||a||^2) still grows at ||a|| = 1e6: "
-               "super-linear growth, L1-DRAC Assumption 1 fails")
+        est = (
+            "the sampled ratio ||F(a)|| / sqrt(1 + ||a||^2) still grows at ||a|| = 1e6: "
+            "super-linear growth, L1-DRAC Assumption 1 fails"
+        )
     return ClosedLoopConstants(
         Quantity("Delta_f", D, How.ESTIMATE, src_f, est),
         Quantity("L_f", L, How.ESTIMATE, src_l, est),
-        Quantity("Delta_star", r0 + F0 / lam.value, How.ESTIMATE, src_s,
-                 "max_box ||x0|| + ||F(t,0)||/lambda with F(t,0) sampled at 5 times"),
+        Quantity(
+            "Delta_star",
+            r0 + F0 / lam.value,
+            How.ESTIMATE,
+            src_s,
+            "max_box ||x0|| + ||F(t,0)||/lambda with F(t,0) sampled at 5 times",
+        ),
     )

@@ -55,7 +55,7 @@ def g_perp_at(s: System, t: float = 0.0) -> np.ndarray:
     """Orthonormal basis of ``ker g(t)^T`` (n x (n-m)), from the SVD of ``g(t)``."""
     G = s.g_at(t)
     u, _, _ = np.linalg.svd(G, full_matrices=True)
-    return u[:, s.m:]
+    return u[:, s.m :]
 
 
 @dataclass(frozen=True)
@@ -73,8 +73,13 @@ class InputConstants:
     theta_ad: tuple[tuple[float, ...], ...]  #: at t = 0
 
     def quantities(self) -> tuple[Quantity, ...]:
-        return (self.Delta_g, self.Delta_g_spectral, self.Delta_g_dot, self.Delta_g_perp,
-                self.Delta_Theta)
+        return (
+            self.Delta_g,
+            self.Delta_g_spectral,
+            self.Delta_g_dot,
+            self.Delta_g_perp,
+            self.Delta_Theta,
+        )
 
     def to_dict(self) -> dict[str, Any]:
         return {
@@ -113,14 +118,24 @@ def input_constants(s: System) -> InputConstants:
     th0 = np.array(th.subs(s.t, 0.0).evalf(), dtype=float)
     return InputConstants(
         Delta_g=Quantity("Delta_g", fro, how, "DRIP Assumption 1 (Frobenius)", scope),
-        Delta_g_spectral=Quantity("Delta_g_spectral", spec, how,
-                                  "spectral-norm bound of g (this project)", scope),
+        Delta_g_spectral=Quantity(
+            "Delta_g_spectral", spec, how, "spectral-norm bound of g (this project)", scope
+        ),
         Delta_g_dot=Quantity("Delta_g_dot", dot, how, "L1-DRAC Assumption 1", scope),
-        Delta_g_perp=Quantity("Delta_g_perp", math.sqrt(n - m), How.EXACT,
-                              "L1-DRAC Assumption 1", "orthonormal g_perp: ||g_perp||_F = "
-                              "sqrt(n - m)"),
-        Delta_Theta=Quantity("Delta_Theta", tnorm, how, "L1-DRAC Assumption 1",
-                             "Theta_ad = (g^T g)^{-1} g^T; " + scope),
+        Delta_g_perp=Quantity(
+            "Delta_g_perp",
+            math.sqrt(n - m),
+            How.EXACT,
+            "L1-DRAC Assumption 1",
+            "orthonormal g_perp: ||g_perp||_F = sqrt(n - m)",
+        ),
+        Delta_Theta=Quantity(
+            "Delta_Theta",
+            tnorm,
+            how,
+            "L1-DRAC Assumption 1",
+            "Theta_ad = (g^T g)^{-1} g^T; " + scope,
+        ),
         rank=int(m if smin > 0 else 0),
         min_singular_value=smin,
         g_perp=tuple(tuple(float(v) for v in row) for row in gp),
@@ -146,8 +161,13 @@ def sample_points(n: int, center: np.ndarray | None = None, seed: int = SAMPLE_S
     return np.concatenate(pts)
 
 
-def growth_ratio_estimate(fn: Callable[[np.ndarray], np.ndarray], n: int, power: float,
-                          times: np.ndarray, seed: int = SAMPLE_SEED) -> tuple[float, np.ndarray]:
+def growth_ratio_estimate(
+    fn: Callable[[np.ndarray], np.ndarray],
+    n: int,
+    power: float,
+    times: np.ndarray,
+    seed: int = SAMPLE_SEED,
+) -> tuple[float, np.ndarray]:
     """Sampled ``sup ||fn(t, a)|| / (1 + ||a||^2)^{power/2}`` and the maximiser.
 
     ``power = 1`` is the drift form ``||F||^2 <= D^2 (1 + ||a||^2)``; ``power = 1/2`` is the
@@ -165,8 +185,13 @@ def growth_ratio_estimate(fn: Callable[[np.ndarray], np.ndarray], n: int, power:
     return best, arg
 
 
-def holder_estimate(fn: Callable[[np.ndarray], np.ndarray], n: int, exponent: float,
-                    times: np.ndarray, seed: int = SAMPLE_SEED) -> float:
+def holder_estimate(
+    fn: Callable[[np.ndarray], np.ndarray],
+    n: int,
+    exponent: float,
+    times: np.ndarray,
+    seed: int = SAMPLE_SEED,
+) -> float:
     """Sampled ``sup ||fn(t,a) - fn(t,b)|| / ||a - b||^exponent`` over pairs at many scales."""
     rng = np.random.default_rng(seed + 1)
     A = sample_points(n, seed=seed)
@@ -235,8 +260,9 @@ def uncertainty_constants(
 
     def put(name: str, value: float, how: How, source: str, nt: str) -> None:
         if name in given:
-            out[name] = Quantity(name, _given_float(given[name], name), How.GIVEN, source,
-                                 "given in [constants]")
+            out[name] = Quantity(
+                name, _given_float(given[name], name), How.GIVEN, source, "given in [constants]"
+            )
         else:
             out[name] = Quantity(name, value, how, source, nt)
 
@@ -246,11 +272,16 @@ def uncertainty_constants(
         "p": (s.diffusion if any(e != 0 for e in s.diffusion) else None, 0.5, 0.0),
     }
     for key, (mat, power, given_bound) in parts.items():
-        growth_src = {"mu": "DRIP Assumption 1 / L1-DRAC Assumption 4",
-                      "sigma": "DRIP Assumption 1 / L1-DRAC Assumption 4",
-                      "p": "L1-DRAC Assumption 1"}[key]
-        lip_src = {"mu": "L1-DRAC Assumption 6", "sigma": "L1-DRAC Assumption 6",
-                   "p": "L1-DRAC Assumptions 1, 5"}[key]
+        growth_src = {
+            "mu": "DRIP Assumption 1 / L1-DRAC Assumption 4",
+            "sigma": "DRIP Assumption 1 / L1-DRAC Assumption 4",
+            "p": "L1-DRAC Assumption 1",
+        }[key]
+        lip_src = {
+            "mu": "L1-DRAC Assumption 6",
+            "sigma": "L1-DRAC Assumption 6",
+            "p": "L1-DRAC Assumptions 1, 5",
+        }[key]
         lip_exp = 1.0 if key == "mu" else 0.5
         if mat is None:
             if given_bound is not None and key != "p":
@@ -258,17 +289,31 @@ def uncertainty_constants(
                 # Theta_ad and g_perp^T (||Theta Lambda|| <= ||Theta||_2 ||Lambda||)
                 thn = float(np.linalg.norm(np.array(th.subs(s.t, 0.0).evalf(), dtype=float), 2))
                 put(f"Delta_{key}", given_bound, How.GIVEN, growth_src, "given in [uncertainty]")
-                put(f"Delta_{key}_par", thn * given_bound, How.SOUND, growth_src + " / (7)",
-                    "||Theta_ad||_2 * Delta (only the bound is known)")
-                put(f"Delta_{key}_perp", given_bound if n > m else 0.0, How.SOUND,
-                    growth_src + " / (7)", "||g_perp^T||_2 = 1 times Delta")
+                put(
+                    f"Delta_{key}_par",
+                    thn * given_bound,
+                    How.SOUND,
+                    growth_src + " / (7)",
+                    "||Theta_ad||_2 * Delta (only the bound is known)",
+                )
+                put(
+                    f"Delta_{key}_perp",
+                    given_bound if n > m else 0.0,
+                    How.SOUND,
+                    growth_src + " / (7)",
+                    "||g_perp^T||_2 = 1 times Delta",
+                )
                 for sub in ("", "_par", "_perp"):
                     if f"L_{key}{sub}" in given:
                         put(f"L_{key}{sub}", 0.0, How.GIVEN, lip_src, "")
                     else:
                         out[f"L_{key}{sub}"] = Quantity(
-                            f"L_{key}{sub}", math.nan, How.ESTIMATE, lip_src,
-                            "unknown: only Delta is given; give it in [constants]")
+                            f"L_{key}{sub}",
+                            math.nan,
+                            How.ESTIMATE,
+                            lip_src,
+                            "unknown: only Delta is given; give it in [constants]",
+                        )
                 continue
             for sub in ("", "_par", "_perp"):
                 put(f"Delta_{key}{sub}", 0.0, How.EXACT, growth_src, "no such term")
@@ -283,21 +328,29 @@ def uncertainty_constants(
         t_rng = (0.0, float(s.horizon)) if len(times) > 1 else (0.0, 0.0)
         for sub, expr in (("", full), ("_par", par), ("_perp", perp)):
             if expr is None:
-                put(f"Delta_{key}{sub}", 0.0, How.EXACT, growth_src + " / (7)", "m = n: no "
-                    "unmatched part")
+                put(
+                    f"Delta_{key}{sub}",
+                    0.0,
+                    How.EXACT,
+                    growth_src + " / (7)",
+                    "m = n: no unmatched part",
+                )
                 put(f"L_{key}{sub}", 0.0, How.EXACT, lip_src, "m = n: no unmatched part")
                 continue
             ev = batch_fn(s, expr) if s.blocks else None
             src = growth_src + (" / (7)" if sub else "")
-            D = growth_bound(expr, s.states, t_sym, t_rng, power, f"Delta_{key}{sub}",
-                             source=src, evaluate=ev)
+            D = growth_bound(
+                expr, s.states, t_sym, t_rng, power, f"Delta_{key}{sub}", source=src, evaluate=ev
+            )
             put(D.name, D.value, D.how, src, D.note)
             if lip_exp == 1.0:
-                L = lipschitz_bound(expr, s.states, t_sym, t_rng, f"L_{key}{sub}",
-                                    source=lip_src, evaluate=ev)
+                L = lipschitz_bound(
+                    expr, s.states, t_sym, t_rng, f"L_{key}{sub}", source=lip_src, evaluate=ev
+                )
             else:
-                L = holder_half_bound(expr, s.states, t_sym, t_rng, f"L_{key}{sub}",
-                                      source=lip_src, evaluate=ev)
+                L = holder_half_bound(
+                    expr, s.states, t_sym, t_rng, f"L_{key}{sub}", source=lip_src, evaluate=ev
+                )
             put(L.name, L.value, L.how, lip_src, L.note)
     return UncertaintyConstants(values=out)
 
@@ -308,7 +361,11 @@ def _depends_on_t(s: System) -> bool:
 
 
 def _given_float(v: Any, name: str) -> float:
-    if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(float(v)) \
-            or float(v) < 0:
+    if (
+        isinstance(v, bool)
+        or not isinstance(v, int | float)
+        or not math.isfinite(float(v))
+        or float(v) < 0
+    ):
         raise SpecError(f"must be a finite number >= 0, got {v!r}", field=f"constants.{name}")
     return float(v)

@@ -52,12 +52,16 @@ class ContractionOptions:
     def from_table(table: Mapping[str, Any], n: int) -> ContractionOptions:
         extra = set(table) - CONTRACTION_KEYS
         if extra:
-            raise SpecError(f"unknown key(s) {sorted(extra)}; allowed {sorted(CONTRACTION_KEYS)}",
-                            field="contraction")
+            raise SpecError(
+                f"unknown key(s) {sorted(extra)}; allowed {sorted(CONTRACTION_KEYS)}",
+                field="contraction",
+            )
         method = table.get("method", "auto")
         if method not in ("auto", "exact-linear", "interval-bnb", "sampled"):
-            raise SpecError(f"method {method!r} is not one of auto, exact-linear, interval-bnb, "
-                            "sampled", field="contraction.method")
+            raise SpecError(
+                f"method {method!r} is not one of auto, exact-linear, interval-bnb, sampled",
+                field="contraction.method",
+            )
         region = table.get("region")
         if region is not None:
             from drip_cert.system.system import _box
@@ -68,15 +72,17 @@ class ContractionOptions:
             raise SpecError(f"must be a number > 0, got {tol!r}", field="contraction.tol")
         mb = table.get("max_boxes", 4000)
         if isinstance(mb, bool) or not isinstance(mb, int) or mb < 1:
-            raise SpecError(f"must be a positive integer, got {mb!r}",
-                            field="contraction.max_boxes")
+            raise SpecError(
+                f"must be a positive integer, got {mb!r}", field="contraction.max_boxes"
+            )
         metric = table.get("metric", True)
         if not isinstance(metric, bool):
             raise SpecError(f"must be true or false, got {metric!r}", field="contraction.metric")
         mt = table.get("max_time", 20.0)
         if isinstance(mt, bool) or not isinstance(mt, int | float) or not mt > 0:
-            raise SpecError(f"must be a number of seconds > 0, got {mt!r}",
-                            field="contraction.max_time")
+            raise SpecError(
+                f"must be a number of seconds > 0, got {mt!r}", field="contraction.max_time"
+            )
         return ContractionOptions(method, region, float(tol), int(mb), metric, float(mt))
 
 
@@ -117,18 +123,30 @@ def analyse_contraction(s: System, which: str, opts: ContractionOptions) -> Cont
     jv = jax.jit(jax.vmap(jac, in_axes=(None, 0)))
 
     def J_num(tt, X):
-        return np.asarray(jv(jnp.float64(tt if tt is not None else 0.0),
-                             jnp.asarray(X, dtype=jnp.float64)))
+        return np.asarray(
+            jv(jnp.float64(tt if tt is not None else 0.0), jnp.asarray(X, dtype=jnp.float64))
+        )
 
     enclose = block_enclose_callback(s.blocks) if s.blocks else None
-    res = contraction_rate(J, s.states, box, s.t if depends_t else None, t_range, J_num=J_num,
-                           enclose=enclose, method=opts.method, tol=opts.tol,
-                           max_boxes=opts.max_boxes, max_time_s=opts.max_time)
+    res = contraction_rate(
+        J,
+        s.states,
+        box,
+        s.t if depends_t else None,
+        t_range,
+        J_num=J_num,
+        enclose=enclose,
+        method=opts.method,
+        tol=opts.tol,
+        max_boxes=opts.max_boxes,
+        max_time_s=opts.max_time,
+    )
     metric, err = None, ""
     if opts.metric:
         try:
-            metric = contraction_metric(J, s.states, box, s.t if depends_t else None, t_range,
-                                        J_num=J_num, enclose=enclose)
+            metric = contraction_metric(
+                J, s.states, box, s.t if depends_t else None, t_range, J_num=J_num, enclose=enclose
+            )
         except DripCertError as exc:
             err = str(exc)
     return ContractionAnalysis(which, res, metric, err)
@@ -200,7 +218,8 @@ class Certificate:
             "how": ce.euclidean.how.value,
             "region": ce.euclidean.region,
             "expert": ce.to_dict(),
-            "learned": None if self.contraction_learned is None
+            "learned": None
+            if self.contraction_learned is None
             else self.contraction_learned.to_dict(),
         }
         diss = None
@@ -213,13 +232,15 @@ class Certificate:
                 "used": d.used,
                 "how": How(d.how).value,
                 "source": "tighter comparison-lemma bound (this project's derivation, valid under "
-                          "DRIP Assumption 2); the paper's Proposition 1 gain is gain_paper",
+                "DRIP Assumption 2); the paper's Proposition 1 gain is gain_paper",
                 "detail": d.to_dict(),
             }
-        rho = {"rho_tasil": json_float(self.rho_tasil) if self.rho_tasil is not None else None,
-               "rho_l1": json_float(self.rho_l1) if self.rho_l1 is not None else None,
-               "rho_total": json_float(self.rho) if self.rho is not None else None,
-               "source": "DRIP eq. (TotalTIG): rho = rho_TaSIL + rho_L1"}
+        rho = {
+            "rho_tasil": json_float(self.rho_tasil) if self.rho_tasil is not None else None,
+            "rho_l1": json_float(self.rho_l1) if self.rho_l1 is not None else None,
+            "rho_total": json_float(self.rho) if self.rho is not None else None,
+            "source": "DRIP eq. (TotalTIG): rho = rho_TaSIL + rho_L1",
+        }
         return {
             "system": self.system.to_dict(),
             "certified": self.certified,
@@ -231,8 +252,9 @@ class Certificate:
             "contraction": contraction,
             "delta_iss": diss,
             "l1drac": None if self.l1 is None else self.l1.to_dict(),
-            "tasil": None if self.tasil is None else {**self.tasil.to_dict(),
-                                                      "provenance": dict(self.tasil_provenance)},
+            "tasil": None
+            if self.tasil is None
+            else {**self.tasil.to_dict(), "provenance": dict(self.tasil_provenance)},
             "rho": rho,
             "notes": list(self.notes),
         }
@@ -257,48 +279,89 @@ def certify(spec: Spec, *, tasil: Any | None = None) -> Certificate:
     notes: list[str] = []
     checks: list[Check] = []
 
-    checks.append(Check(
-        id="DRIP-A1", holds=ic.rank == s.m,
-        detail=(f"g has full column rank m = {s.m} (smallest singular value "
+    checks.append(
+        Check(
+            id="DRIP-A1",
+            holds=ic.rank == s.m,
+            detail=(
+                f"g has full column rank m = {s.m} (smallest singular value "
                 f"{ic.min_singular_value:.4g}); Delta_g = {ic.Delta_g.value:.6g} (Frobenius), "
                 f"{ic.Delta_g_spectral.value:.6g} (spectral); Delta_mu = "
                 f"{uc['Delta_mu'].value:.6g} ({uc['Delta_mu'].how.value}), Delta_sigma = "
-                f"{uc['Delta_sigma'].value:.6g} ({uc['Delta_sigma'].how.value})"),
-        lhs=float(ic.rank), rhs=float(s.m), margin=ic.min_singular_value,
-        source="DRIP Assumption 1", how=How.EXACT if s.g_is_constant else How.ESTIMATE))
+                f"{uc['Delta_sigma'].value:.6g} ({uc['Delta_sigma'].how.value})"
+            ),
+            lhs=float(ic.rank),
+            rhs=float(s.m),
+            margin=ic.min_singular_value,
+            source="DRIP Assumption 1",
+            how=How.EXACT if s.g_is_constant else How.ESTIMATE,
+        )
+    )
 
     ce = analyse_contraction(s, "expert", opts)
     r = ce.euclidean
-    checks.append(Check(
-        id="DRIP-A2", holds=r.holds,
-        detail=(f"expert closed loop: mu_2(J) <= -lambda with lambda = {r.rate:.6g} "
+    checks.append(
+        Check(
+            id="DRIP-A2",
+            holds=r.holds,
+            detail=(
+                f"expert closed loop: mu_2(J) <= -lambda with lambda = {r.rate:.6g} "
                 f"({r.how.value}, {r.method}) on {r.region}"
                 + ("" if r.holds else "; contraction is not established")
-                + (" [the paper asks for all x; this holds on the region named]"
-                   if r.region.startswith("box") else "")),
-        lhs=-r.rate, rhs=0.0, margin=r.rate, source="DRIP Assumption 2", how=r.how,
-        witness=None if r.holds else r.witness))
+                + (
+                    " [the paper asks for all x; this holds on the region named]"
+                    if r.region.startswith("box")
+                    else ""
+                )
+            ),
+            lhs=-r.rate,
+            rhs=0.0,
+            margin=r.rate,
+            source="DRIP Assumption 2",
+            how=r.how,
+            witness=None if r.holds else r.witness,
+        )
+    )
     cl = None
     if s.learned is not None:
         cl = analyse_contraction(s, "learned", opts)
         rl = cl.euclidean
-        checks.append(Check(
-            id="L1DRAC-A2", holds=rl.holds,
-            detail=(f"learned closed loop (the nominal system of the L1-DRAC layer): lambda = "
-                    f"{rl.rate:.6g} ({rl.how.value}, {rl.method}) on {rl.region}"),
-            lhs=-rl.rate, rhs=0.0, margin=rl.rate, source="L1-DRAC Assumption 2", how=rl.how,
-            witness=None if rl.holds else rl.witness))
+        checks.append(
+            Check(
+                id="L1DRAC-A2",
+                holds=rl.holds,
+                detail=(
+                    f"learned closed loop (the nominal system of the L1-DRAC layer): lambda = "
+                    f"{rl.rate:.6g} ({rl.how.value}, {rl.method}) on {rl.region}"
+                ),
+                lhs=-rl.rate,
+                rhs=0.0,
+                margin=rl.rate,
+                source="L1-DRAC Assumption 2",
+                how=rl.how,
+                witness=None if rl.holds else rl.witness,
+            )
+        )
     lam_l1 = (cl.euclidean if cl is not None else ce.euclidean).rate
     dgp = ic.Delta_g_perp.value
     mperp = max(uc["Delta_mu_perp"].value, uc["L_mu_perp"].value)
     rhs7 = dgp * mperp
-    checks.append(Check(
-        id="L1DRAC-A7", holds=lam_l1 > rhs7,
-        detail=(f"unmatched small gain: lambda = {lam_l1:.6g} > Delta_g_perp * max(Delta_mu_perp, "
+    checks.append(
+        Check(
+            id="L1DRAC-A7",
+            holds=lam_l1 > rhs7,
+            detail=(
+                f"unmatched small gain: lambda = {lam_l1:.6g} > Delta_g_perp * max(Delta_mu_perp, "
                 f"L_mu_perp) = {dgp:.6g} * {mperp:.6g}"
-                f" = {rhs7:.6g}"),
-        lhs=rhs7, rhs=lam_l1, margin=lam_l1 - rhs7, source="L1-DRAC Assumption 7",
-        how=How.ESTIMATE if uc["Delta_mu_perp"].how == How.ESTIMATE else How.SOUND))
+                f" = {rhs7:.6g}"
+            ),
+            lhs=rhs7,
+            rhs=lam_l1,
+            margin=lam_l1 - rhs7,
+            source="L1-DRAC Assumption 7",
+            how=How.ESTIMATE if uc["Delta_mu_perp"].how == How.ESTIMATE else How.SOUND,
+        )
+    )
 
     diss = None
     if r.holds:
@@ -318,20 +381,35 @@ def certify(spec: Spec, *, tasil: Any | None = None) -> Certificate:
         st = tasil_settings(spec.table("tasil"))
         train = demonstrations(s, st.trajectories, st.samples, st.seed, 0)
         held = demonstrations(s, st.heldout, st.samples, st.seed, 1) if st.heldout else None
-        gamma0 = Quantity("gamma0", diss.tight_gain_asymptotic, diss.how,
-                          "delta-ISS gain (comparison lemma)", "||g||_2 / lambda")
-        tasil, tasil_prov = tasil_section(s, train, held, gamma0,
-                                          r.region.startswith("all"), st,
-                                          method=f"{st.method}-{st.order}")
+        gamma0 = Quantity(
+            "gamma0",
+            diss.tight_gain_asymptotic,
+            diss.how,
+            "delta-ISS gain (comparison lemma)",
+            "||g||_2 / lambda",
+        )
+        tasil, tasil_prov = tasil_section(
+            s, train, held, gamma0, r.region.startswith("all"), st, method=f"{st.method}-{st.order}"
+        )
     if tasil is not None:
         ok = tasil.rho is not None and math.isfinite(tasil.rho)
-        checks.append(Check(
-            id="TaSIL", holds=ok,
-            detail=("rho_TaSIL = " + (f"{tasil.rho:.6g}" if ok else "inf")
+        checks.append(
+            Check(
+                id="TaSIL",
+                holds=ok,
+                detail=(
+                    "rho_TaSIL = "
+                    + (f"{tasil.rho:.6g}" if ok else "inf")
                     + f" ({tasil.rho_form}); deterministic gap bound over the given initial "
-                    f"states {tasil.gap_bound:.6g}" + ("" if ok else f"; {tasil.gap_reason}")),
-            lhs=float(tasil.rho) if ok else math.inf, rhs=math.inf, margin=math.nan,
-            source="math/tasil.md sections 3-4 (this project's construction)", how=How.SOUND))
+                    f"states {tasil.gap_bound:.6g}" + ("" if ok else f"; {tasil.gap_reason}")
+                ),
+                lhs=float(tasil.rho) if ok else math.inf,
+                rhs=math.inf,
+                margin=math.nan,
+                source="math/tasil.md sections 3-4 (this project's construction)",
+                how=How.SOUND,
+            )
+        )
     l1 = None
     if "l1drac" in spec.tables:
         from drip_cert.bounds.l1_system import l1_section
@@ -342,25 +420,64 @@ def certify(spec: Spec, *, tasil: Any | None = None) -> Certificate:
         if lam_q.value <= 0 < est:
             # the sound route did not establish contraction but sampling suggests it: design
             # with the estimate, labelled so, and the L1DRAC-A2 check above stays failed
-            lam_q = Quantity("lambda", est, How.ESTIMATE, lam_q.source,
-                             "sampled estimate of the rate (the sound bound did not establish "
-                             "contraction): the L1-DRAC design below is conditional on it")
-            notes.append("the L1-DRAC design uses a sampled estimate of the contraction rate of "
-                         f"the {src.policy} closed loop ({est:.6g}); it is not certified")
-        l1 = l1_section(s, spec.table("l1drac"), given, lam_q,
-                        src.euclidean.region.startswith("all"), src.policy,
-                        {q.name: q for q in ic.quantities()}, uc.values)
+            lam_q = Quantity(
+                "lambda",
+                est,
+                How.ESTIMATE,
+                lam_q.source,
+                "sampled estimate of the rate (the sound bound did not establish "
+                "contraction): the L1-DRAC design below is conditional on it",
+            )
+            notes.append(
+                "the L1-DRAC design uses a sampled estimate of the contraction rate of "
+                f"the {src.policy} closed loop ({est:.6g}); it is not certified"
+            )
+        l1 = l1_section(
+            s,
+            spec.table("l1drac"),
+            given,
+            lam_q,
+            src.euclidean.region.startswith("all"),
+            src.policy,
+            {q.name: q for q in ic.quantities()},
+            uc.values,
+        )
         conditional = lam_q.how == How.ESTIMATE
-        checks.append(Check(
-            id="L1DRAC-design", holds=l1.feasible,
-            detail=(("conditional on the ESTIMATED rate lambda = " + f"{lam_q.value:.6g}: "
-                     if conditional else "") + ("feasible design: " + ", ".join(
-                f"{k} = {l1.design.to_dict()[k]:.6g}" for k in ("omega", "lambda_s", "Ts",
-                                                                "rho_r", "rho_a", "rho"))
-                    if l1.feasible else "no feasible design: "
-                    + (l1.design.reason if l1.design is not None else l1.error))),
-            source="L1-DRAC (16), (21), (24)", how=How.ESTIMATE if conditional else How.EXACT))
-    return Certificate(system=s, assumptions=tuple(checks), inputs=ic, uncertainty=uc,
-                       contraction_expert=ce, contraction_learned=cl, delta_iss=diss,
-                       l1=l1, tasil=tasil, tasil_provenance=tasil_prov, notes=tuple(notes))
-
+        checks.append(
+            Check(
+                id="L1DRAC-design",
+                holds=l1.feasible,
+                detail=(
+                    (
+                        "conditional on the ESTIMATED rate lambda = " + f"{lam_q.value:.6g}: "
+                        if conditional
+                        else ""
+                    )
+                    + (
+                        "feasible design: "
+                        + ", ".join(
+                            f"{k} = {l1.design.to_dict()[k]:.6g}"
+                            for k in ("omega", "lambda_s", "Ts", "rho_r", "rho_a", "rho")
+                        )
+                        if l1.feasible
+                        else "no feasible design: "
+                        + (l1.design.reason if l1.design is not None else l1.error)
+                    )
+                ),
+                source="L1-DRAC (16), (21), (24)",
+                how=How.ESTIMATE if conditional else How.EXACT,
+            )
+        )
+    return Certificate(
+        system=s,
+        assumptions=tuple(checks),
+        inputs=ic,
+        uncertainty=uc,
+        contraction_expert=ce,
+        contraction_learned=cl,
+        delta_iss=diss,
+        l1=l1,
+        tasil=tasil,
+        tasil_provenance=tasil_prov,
+        notes=tuple(notes),
+    )

@@ -27,8 +27,20 @@ from drip_cert.errors import AssumptionViolation, SpecError
 from drip_cert.provenance import How, Quantity
 from drip_cert.system.system import System
 
-L1_KEYS = {"p", "lambda_s", "omega", "Ts", "rho_r", "rho_a", "delta", "alpha", "eps_r", "eps_a",
-           "p_star", "lip_f"}
+L1_KEYS = {
+    "p",
+    "lambda_s",
+    "omega",
+    "Ts",
+    "rho_r",
+    "rho_a",
+    "delta",
+    "alpha",
+    "eps_r",
+    "eps_a",
+    "p_star",
+    "lip_f",
+}
 DEFAULT_EPS = 1e-3  #: default slacks eps_r, eps_a of (16a), (16b)
 
 
@@ -50,8 +62,9 @@ class L1Section:
         if self.design is None:
             out.update(feasible=False, reason=self.error)
         out["constants_used"] = {k: q.to_dict() for k, q in self.constants.items()}
-        out["tradeoff"] = [{"rho_a": r.rho_a, "Ts_max": r.Ts_max, "rho": r.rho}
-                           for r in self.tradeoff]
+        out["tradeoff"] = [
+            {"rho_a": r.rho_a, "Ts_max": r.Ts_max, "rho": r.rho} for r in self.tradeoff
+        ]
         return out
 
 
@@ -59,16 +72,30 @@ def _num(table: Mapping[str, Any], key: str, default: Any, positive: bool = True
     v = table.get(key, default)
     if v is None:
         return None
-    if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(float(v)) or (
-            positive and not float(v) > 0) or float(v) < 0:
-        raise SpecError(f"must be a finite number {'> 0' if positive else '>= 0'}, got {v!r}",
-                        field=f"l1drac.{key}")
+    if (
+        isinstance(v, bool)
+        or not isinstance(v, int | float)
+        or not math.isfinite(float(v))
+        or (positive and not float(v) > 0)
+        or float(v) < 0
+    ):
+        raise SpecError(
+            f"must be a finite number {'> 0' if positive else '>= 0'}, got {v!r}",
+            field=f"l1drac.{key}",
+        )
     return float(v)
 
 
-def l1_section(s: System, table: Mapping[str, Any], given: Mapping[str, Any],
-               lam: Quantity, global_rate: bool, which: str,
-               input_q: Mapping[str, Quantity], unc_q: Mapping[str, Quantity]) -> L1Section:
+def l1_section(
+    s: System,
+    table: Mapping[str, Any],
+    given: Mapping[str, Any],
+    lam: Quantity,
+    global_rate: bool,
+    which: str,
+    input_q: Mapping[str, Quantity],
+    unc_q: Mapping[str, Quantity],
+) -> L1Section:
     """Assemble the L1-DRAC constants of ``s`` and run the designer.
 
     Parameters
@@ -89,8 +116,9 @@ def l1_section(s: System, table: Mapping[str, Any], given: Mapping[str, Any],
 
     extra = set(table) - L1_KEYS
     if extra:
-        raise SpecError(f"unknown key(s) {sorted(extra)}; allowed {sorted(L1_KEYS)}",
-                        field="l1drac")
+        raise SpecError(
+            f"unknown key(s) {sorted(extra)}; allowed {sorted(L1_KEYS)}", field="l1drac"
+        )
     p = table.get("p", 1)
     if isinstance(p, bool) or not isinstance(p, int) or p < 1:
         raise SpecError(f"must be a positive integer, got {p!r}", field="l1drac.p")
@@ -99,11 +127,15 @@ def l1_section(s: System, table: Mapping[str, Any], given: Mapping[str, Any],
         raise SpecError(f"must be an integer >= p = {p}, got {p_star!r}", field="l1drac.p_star")
     q: dict[str, Quantity] = {}
     if lam.value <= 0:
-        return L1Section({"lambda": lam}, None,
-                         f"the {which} closed loop is not shown to contract (lambda = "
-                         f"{lam.value:.6g}): L1-DRAC Assumption 2 fails, no design")
-    q["lambda"] = Quantity("lambda", lam.value, lam.how, "L1-DRAC Assumption 2 (" + which
-                           + " closed loop)", lam.note)
+        return L1Section(
+            {"lambda": lam},
+            None,
+            f"the {which} closed loop is not shown to contract (lambda = "
+            f"{lam.value:.6g}): L1-DRAC Assumption 2 fails, no design",
+        )
+    q["lambda"] = Quantity(
+        "lambda", lam.value, lam.how, "L1-DRAC Assumption 2 (" + which + " closed loop)", lam.note
+    )
     cl = closed_loop_constants(s, which, lam, global_rate)
     for qq in cl.quantities():
         q[qq.name] = qq
@@ -112,14 +144,32 @@ def l1_section(s: System, table: Mapping[str, Any], given: Mapping[str, Any],
     for name, qq in unc_q.items():
         q[name] = qq
     # time-Lipschitz constants (hats): zero for time-invariant terms
-    t_free = not any(s.t in e.free_symbols for mat in (s.lambda_mu, s.lambda_sigma, s.diffusion)
-                     if mat is not None for e in mat)
-    for name in ("L_p_hat", "L_p_par_hat", "L_p_perp_hat", "L_mu_hat", "L_mu_par_hat",
-                 "L_mu_perp_hat", "L_sigma_hat", "L_sigma_par_hat", "L_sigma_perp_hat"):
-        q[name] = Quantity(name, 0.0 if t_free else math.nan,
-                           How.EXACT if t_free else How.ESTIMATE, "L1-DRAC Assumptions 1, 5, 6",
-                           "time-invariant terms" if t_free else
-                           "time-varying terms: give this constant in [constants]")
+    t_free = not any(
+        s.t in e.free_symbols
+        for mat in (s.lambda_mu, s.lambda_sigma, s.diffusion)
+        if mat is not None
+        for e in mat
+    )
+    for name in (
+        "L_p_hat",
+        "L_p_par_hat",
+        "L_p_perp_hat",
+        "L_mu_hat",
+        "L_mu_par_hat",
+        "L_mu_perp_hat",
+        "L_sigma_hat",
+        "L_sigma_par_hat",
+        "L_sigma_perp_hat",
+    ):
+        q[name] = Quantity(
+            name,
+            0.0 if t_free else math.nan,
+            How.EXACT if t_free else How.ESTIMATE,
+            "L1-DRAC Assumptions 1, 5, 6",
+            "time-invariant terms"
+            if t_free
+            else "time-varying terms: give this constant in [constants]",
+        )
     if "Delta_star" in table:
         raise SpecError("give Delta_star in [constants], not in [l1drac]", field="l1drac")
     alpha_default = 0.0
@@ -130,12 +180,21 @@ def l1_section(s: System, table: Mapping[str, Any], given: Mapping[str, Any],
         far = np.maximum(np.abs(a[:, 1] - b[:, 0]), np.abs(b[:, 1] - a[:, 0]))
         alpha_default = float(np.linalg.norm(far))
         alpha_note = "largest distance between the supports of D and D_bar (any coupling)"
-    q["alpha"] = Quantity("alpha", _num(table, "alpha", alpha_default, positive=False),
-                          How.GIVEN if "alpha" in table else How.SOUND, "L1-DRAC (18a)",
-                          "given in [l1drac]" if "alpha" in table else alpha_note)
+    q["alpha"] = Quantity(
+        "alpha",
+        _num(table, "alpha", alpha_default, positive=False),
+        How.GIVEN if "alpha" in table else How.SOUND,
+        "L1-DRAC (18a)",
+        "given in [l1drac]" if "alpha" in table else alpha_note,
+    )
     for key in ("eps_r", "eps_a"):
-        q[key] = Quantity(key, _num(table, key, DEFAULT_EPS), How.GIVEN, "L1-DRAC (16)",
-                          "user slack" + ("" if key in table else f" (default {DEFAULT_EPS})"))
+        q[key] = Quantity(
+            key,
+            _num(table, key, DEFAULT_EPS),
+            How.GIVEN,
+            "L1-DRAC (16)",
+            "user slack" + ("" if key in table else f" (default {DEFAULT_EPS})"),
+        )
     for name, v in given.items():
         if name in q:
             if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
@@ -148,8 +207,13 @@ def l1_section(s: System, table: Mapping[str, Any], given: Mapping[str, Any],
         raise SpecError(f"must be true or false, got {lip_f!r}", field="l1drac.lip_f")
     bad = [k for k, v in q.items() if not math.isfinite(v.value) and not (k == "L_f" and not lip_f)]
     if bad:
-        return L1Section(q, None, "constants without a finite value: " + ", ".join(
-            f"{k} ({q[k].note})" for k in bad) + "; give them in [constants]")
+        return L1Section(
+            q,
+            None,
+            "constants without a finite value: "
+            + ", ".join(f"{k} ({q[k].note})" for k in bad)
+            + "; give them in [constants]",
+        )
     values = {k: v.value for k, v in q.items()}
     values["lambda"] = values.pop("lambda")
     values.update(p_star=int(p_star), m=s.m, lip_f=bool(lip_f))
@@ -159,10 +223,15 @@ def l1_section(s: System, table: Mapping[str, Any], given: Mapping[str, Any],
         consts = L1Constants.from_mapping(values)
     except AssumptionViolation as exc:
         return L1Section(q, None, str(exc))
-    req = DesignRequest(p=int(p), lambda_s=_num(table, "lambda_s", None),
-                        omega=_num(table, "omega", None), Ts=_num(table, "Ts", None),
-                        rho_r=_num(table, "rho_r", None), rho_a=_num(table, "rho_a", None),
-                        delta=_num(table, "delta", None))
+    req = DesignRequest(
+        p=int(p),
+        lambda_s=_num(table, "lambda_s", None),
+        omega=_num(table, "omega", None),
+        Ts=_num(table, "Ts", None),
+        rho_r=_num(table, "rho_r", None),
+        rho_a=_num(table, "rho_a", None),
+        delta=_num(table, "delta", None),
+    )
     d = design(consts, req)
     rows: tuple = ()
     if d.feasible:

@@ -75,8 +75,9 @@ def tasil_settings(table: Mapping[str, Any]) -> TasilSettings:
     """Validate the ``[tasil]`` table of a spec (unknown keys and bad values: SpecError)."""
     extra = set(table) - set(_DEFAULTS)
     if extra:
-        raise SpecError(f"unknown key(s) {sorted(extra)}; allowed {sorted(_DEFAULTS)}",
-                        field="tasil")
+        raise SpecError(
+            f"unknown key(s) {sorted(extra)}; allowed {sorted(_DEFAULTS)}", field="tasil"
+        )
     v = {**_DEFAULTS, **dict(table)}
     if v["method"] not in ("tasil", "bc"):
         raise SpecError(f"must be 'tasil' or 'bc', got {v['method']!r}", field="tasil.method")
@@ -87,13 +88,18 @@ def tasil_settings(table: Mapping[str, Any]) -> TasilSettings:
     if v["order"] not in (1, 2):
         raise SpecError(f"must be 1 or 2, got {v['order']!r}", field="tasil.order")
     hidden = v["hidden"]
-    if not isinstance(hidden, list) or not hidden or any(
-            isinstance(h, bool) or not isinstance(h, int) or h < 1 for h in hidden):
-        raise SpecError(f"must be a list of positive integers, got {hidden!r}",
-                        field="tasil.hidden")
+    if (
+        not isinstance(hidden, list)
+        or not hidden
+        or any(isinstance(h, bool) or not isinstance(h, int) or h < 1 for h in hidden)
+    ):
+        raise SpecError(
+            f"must be a list of positive integers, got {hidden!r}", field="tasil.hidden"
+        )
     if v["activation"] not in ("tanh", "gelu"):
-        raise SpecError(f"must be 'tanh' or 'gelu' (smooth), got {v['activation']!r}",
-                        field="tasil.activation")
+        raise SpecError(
+            f"must be 'tanh' or 'gelu' (smooth), got {v['activation']!r}", field="tasil.activation"
+        )
     for key in ("lr", "delta", "eta", "tube_radius"):
         x = v[key]
         if isinstance(x, bool) or not isinstance(x, int | float) or not x > 0 or x != x:
@@ -104,11 +110,23 @@ def tasil_settings(table: Mapping[str, Any]) -> TasilSettings:
         raise SpecError(f"must be an integer, got {v['seed']!r}", field="tasil.seed")
     if v["policy"] is not None and not isinstance(v["policy"], str):
         raise SpecError("must be a path string", field="tasil.policy")
-    return TasilSettings(v["method"], int(v["order"]), int(v["trajectories"]),
-                         int(v["heldout"]), int(v["samples"]), tuple(int(h) for h in hidden),
-                         v["activation"], int(v["steps"]), float(v["lr"]), int(v["batch"]),
-                         int(v["seed"]), float(v["delta"]), float(v["eta"]),
-                         float(v["tube_radius"]), v["policy"])
+    return TasilSettings(
+        v["method"],
+        int(v["order"]),
+        int(v["trajectories"]),
+        int(v["heldout"]),
+        int(v["samples"]),
+        tuple(int(h) for h in hidden),
+        v["activation"],
+        int(v["steps"]),
+        float(v["lr"]),
+        int(v["batch"]),
+        int(v["seed"]),
+        float(v["delta"]),
+        float(v["eta"]),
+        float(v["tube_radius"]),
+        v["policy"],
+    )
 
 
 def nominal_field(s: System):
@@ -128,15 +146,18 @@ def demonstrations(s: System, n: int, k: int, seed: int, stream: int = 0) -> Dem
     from drip_cert._jax import jax
 
     key = jax.random.fold_in(jax.random.PRNGKey(seed), stream)
-    return generate_demonstrations(nominal_field(s), s.numeric.expert,
-                                   np.array(s.support), n, s.horizon, k, key)
+    return generate_demonstrations(
+        nominal_field(s), s.numeric.expert, np.array(s.support), n, s.horizon, k, key
+    )
 
 
 def learned_system(s: System, mlp: MLP, name: str = POLICY_BLOCK, source: str = "") -> System:
     """``s`` with ``pi_IL = mlp`` as a block named ``name`` (``pi_il(x)[j]``)."""
     if mlp.in_dim != s.n or mlp.out_dim != s.m:
-        raise SpecError(f"the policy maps R^{mlp.in_dim} -> R^{mlp.out_dim}, the system needs "
-                        f"R^{s.n} -> R^{s.m}")
+        raise SpecError(
+            f"the policy maps R^{mlp.in_dim} -> R^{mlp.out_dim}, the system needs "
+            f"R^{s.n} -> R^{s.m}"
+        )
     block = mlp_block(name, mlp, source=source)
     exprs = [block.component(j)(*s.states) for j in range(s.m)]
     return s.with_learned(exprs, {name: block})
@@ -161,18 +182,28 @@ def jacobian_lipschitz(s: System, which: str, box: np.ndarray | None = None) -> 
     dec = affine_in_blocks(pol, s)
     if dec is not None and all(s.blocks[b].mlp is not None for b in dec.C):
         if not dec.C:
-            return Quantity(f"L_dpi_{which}", 0.0, How.EXACT,
-                            "DRIP Assumption PolicyRegularity (b)", "affine policy: zero Hessian")
+            return Quantity(
+                f"L_dpi_{which}",
+                0.0,
+                How.EXACT,
+                "DRIP Assumption PolicyRegularity (b)",
+                "affine policy: zero Hessian",
+            )
         total, notes = 0.0, []
         for bname, C in sorted(dec.C.items()):
             c2 = float(np.linalg.norm(C, 2))
             L = jacobian_lipschitz_bound(s.blocks[bname].mlp).value
             total += c2 * L
             notes.append(f"||C_{bname}||_2 = {c2:.4g} times L_d{bname} = {L:.4g}")
-        return Quantity(f"L_dpi_{which}", total * (1 + 1e-12), How.SOUND,
-                        "DRIP Assumption PolicyRegularity (b)",
-                        "policy affine in MLP blocks; " + "; ".join(notes)
-                        + " (layerwise product-rule bound, global)")
+        return Quantity(
+            f"L_dpi_{which}",
+            total * (1 + 1e-12),
+            How.SOUND,
+            "DRIP Assumption PolicyRegularity (b)",
+            "policy affine in MLP blocks; "
+            + "; ".join(notes)
+            + " (layerwise product-rule bound, global)",
+        )
     if box is not None and not s.blocks:
         from drip_cert.analysis.interval import UnsupportedExpression, enclose_expr
 
@@ -181,14 +212,21 @@ def jacobian_lipschitz(s: System, which: str, box: np.ndarray | None = None) -> 
             for e in pol:
                 for xi in s.states:
                     for xj in s.states:
-                        lo, hi = enclose_expr(sp.diff(e, xi, xj), list(s.states),
-                                              [tuple(b) for b in np.asarray(box, dtype=float)])
+                        lo, hi = enclose_expr(
+                            sp.diff(e, xi, xj),
+                            list(s.states),
+                            [tuple(b) for b in np.asarray(box, dtype=float)],
+                        )
                         acc += max(abs(lo), abs(hi)) ** 2
             region = [[round(float(v), 4) for v in row] for row in np.asarray(box)]
-            return Quantity(f"L_dpi_{which}", float(np.sqrt(acc)) * (1 + 1e-12), How.SOUND,
-                            "DRIP Assumption PolicyRegularity (b)",
-                            f"interval enclosure of d^2 pi (Frobenius) on the box {region}: "
-                            "valid on that box only")
+            return Quantity(
+                f"L_dpi_{which}",
+                float(np.sqrt(acc)) * (1 + 1e-12),
+                How.SOUND,
+                "DRIP Assumption PolicyRegularity (b)",
+                f"interval enclosure of d^2 pi (Frobenius) on the box {region}: "
+                "valid on that box only",
+            )
         except UnsupportedExpression:
             pass
     # sampled estimate of sup ||Hessian||_F on the support box enlarged by 1
@@ -201,9 +239,14 @@ def jacobian_lipschitz(s: System, which: str, box: np.ndarray | None = None) -> 
     X = rng.uniform(box[:, 0] - 1.0, box[:, 1] + 1.0, size=(4096, s.n))
     H = np.asarray(hess(jnp.asarray(X)))
     val = float(np.max(np.sqrt(np.sum(H**2, axis=(1, 2, 3)))))
-    return Quantity(f"L_dpi_{which}", val, How.ESTIMATE, "DRIP Assumption PolicyRegularity (b)",
-                    "sampled sup ||d^2 pi||_F on the support box enlarged by 1 (4096 points, "
-                    "seed 0): an estimate, not a bound")
+    return Quantity(
+        f"L_dpi_{which}",
+        val,
+        How.ESTIMATE,
+        "DRIP Assumption PolicyRegularity (b)",
+        "sampled sup ||d^2 pi||_F on the support box enlarged by 1 (4096 points, "
+        "seed 0): an estimate, not a bound",
+    )
 
 
 # ------------------------------------------------------------------ h_0, h_1 along trajectories
@@ -251,8 +294,9 @@ class TrainedPolicy:
     settings: TasilSettings
 
 
-def train_on_system(s: System, settings: TasilSettings, method: str | None = None,
-                    progress: bool = False) -> TrainedPolicy:
+def train_on_system(
+    s: System, settings: TasilSettings, method: str | None = None, progress: bool = False
+) -> TrainedPolicy:
     """Generate demonstrations, train TaSIL (or BC) and attach the policy to ``s``.
 
     Training and held-out demonstrations use independent streams of ``settings.seed``.
@@ -261,18 +305,36 @@ def train_on_system(s: System, settings: TasilSettings, method: str | None = Non
 
     method = method or settings.method
     train = demonstrations(s, settings.trajectories, settings.samples, settings.seed, 0)
-    heldout = (demonstrations(s, settings.heldout, settings.samples, settings.seed, 1)
-               if settings.heldout > 0 else None)
-    res = train_policy(train, s.numeric.expert, method=method, order=settings.order,
-                       hidden=settings.hidden, activation=settings.activation,
-                       seed=settings.seed, steps=settings.steps, lr=settings.lr,
-                       batch=settings.batch, progress=progress)
+    heldout = (
+        demonstrations(s, settings.heldout, settings.samples, settings.seed, 1)
+        if settings.heldout > 0
+        else None
+    )
+    res = train_policy(
+        train,
+        s.numeric.expert,
+        method=method,
+        order=settings.order,
+        hidden=settings.hidden,
+        activation=settings.activation,
+        seed=settings.seed,
+        steps=settings.steps,
+        lr=settings.lr,
+        batch=settings.batch,
+        progress=progress,
+    )
     return TrainedPolicy(learned_system(s, res.mlp), res.mlp, res, train, heldout, settings)
 
 
-def tasil_section(s: System, train: Demonstrations, heldout: Demonstrations | None,
-                  gamma0: Quantity, contraction_global: bool, settings: TasilSettings,
-                  method: str = "tasil-1"):
+def tasil_section(
+    s: System,
+    train: Demonstrations,
+    heldout: Demonstrations | None,
+    gamma0: Quantity,
+    contraction_global: bool,
+    settings: TasilSettings,
+    method: str = "tasil-1",
+):
     """The TaSIL certificate of ``s.learned`` (math/tasil.md sections 3-4).
 
     ``gamma0`` is the linear delta-ISS gain of the expert closed loop (tighter comparison bound);
@@ -292,17 +354,28 @@ def tasil_section(s: System, train: Demonstrations, heldout: Demonstrations | No
         R = min(R, margin)
     L_Delta = L_il.value + L_ex.value
     h_train, how_t = trajectory_h(s, train, L_Delta, contraction_global)
-    h_val, _ = (trajectory_h(s, heldout, L_Delta, contraction_global) if heldout is not None
-                else (None, how_t))
+    h_val, _ = (
+        trajectory_h(s, heldout, L_Delta, contraction_global)
+        if heldout is not None
+        else (None, how_t)
+    )
     # thresholds computed from the training data only (valid for the held-out form): the
     # training maxima with a 25 % margin, so that fresh states rarely exceed them
     tau = (TAU_MARGIN * max(h.h0 for h in h_train), TAU_MARGIN * max(h.h1 for h in h_train))
     cert = tasil_certificate(
-        [h.h0 for h in h_train], [h.h1 for h in h_train], gamma0=gamma0.value, tau=tau,
-        L_Delta=L_Delta, delta=settings.delta, eta=settings.eta, R=R,
+        [h.h0 for h in h_train],
+        [h.h1 for h in h_train],
+        gamma0=gamma0.value,
+        tau=tau,
+        L_Delta=L_Delta,
+        delta=settings.delta,
+        eta=settings.eta,
+        R=R,
         heldout_h0=None if h_val is None else [h.h0 for h in h_val],
         heldout_h1=None if h_val is None else [h.h1 for h in h_val],
-        method=method, continuous=True)
+        method=method,
+        continuous=True,
+    )
     provenance = {
         "L_dpi_learned": L_il.to_dict(),
         "L_dpi_expert": L_ex.to_dict(),

@@ -145,8 +145,9 @@ class Block:
 
 def mlp_block(name: str, mlp: MLP, source: str = "") -> Block:
     """Wrap an :class:`~drip_cert.learn.mlp.MLP` as a block."""
-    return Block(name=name, in_dim=mlp.in_dim, out_dim=mlp.out_dim, fn=mlp.apply_jax, mlp=mlp,
-                 source=source)
+    return Block(
+        name=name, in_dim=mlp.in_dim, out_dim=mlp.out_dim, fn=mlp.apply_jax, mlp=mlp, source=source
+    )
 
 
 def load_mlp_block(
@@ -158,8 +159,9 @@ def load_mlp_block(
     field: str | None = None,
 ) -> Block:
     """Load an MLP block from ``weights`` (.npz, ``allow_pickle=False``), checking its shape."""
-    mlp = load_mlp(weights, activation=activation, expect_in=inputs, expect_out=outputs,
-                   field=field)
+    mlp = load_mlp(
+        weights, activation=activation, expect_in=inputs, expect_out=outputs, field=field
+    )
     return mlp_block(name, mlp, source=str(weights))
 
 

@@ -105,8 +105,9 @@ def parse_expression(
     try:
         out = parser.visit(tree.body)
     except RecursionError:
-        raise SpecError(f"expression {text!r} is nested too deeply", field=field,
-                        path=path) from None
+        raise SpecError(
+            f"expression {text!r} is nested too deeply", field=field, path=path
+        ) from None
     if not isinstance(out, sp.Expr):
         raise SpecError(
             f"{text!r} is a vector; use it only inside norm(...) or a block call",
@@ -201,12 +202,18 @@ class _Parser:
         return self._call(node, index=None)
 
     def visit_Subscript(self, node: ast.Subscript):
-        if not (isinstance(node.value, ast.Call) and isinstance(node.value.func, ast.Name)
-                and node.value.func.id in self.blocks):
+        if not (
+            isinstance(node.value, ast.Call)
+            and isinstance(node.value.func, ast.Name)
+            and node.value.func.id in self.blocks
+        ):
             raise self.fail("subscripts are allowed only on block calls, as h(x)[0]")
         sl = node.slice
-        if not (isinstance(sl, ast.Constant) and isinstance(sl.value, int)
-                and not isinstance(sl.value, bool)):
+        if not (
+            isinstance(sl, ast.Constant)
+            and isinstance(sl.value, int)
+            and not isinstance(sl.value, bool)
+        ):
             raise self.fail("a block output index must be a non-negative integer literal")
         return self._call(node.value, index=sl.value)
 

@@ -100,8 +100,9 @@ def lower(
             for deriv, j, pos in call.outputs:
                 order = len(deriv)
                 if order not in results:
-                    results[order] = call.block.fn(z) if order == 0 else _deriv_fn(
-                        call.block, order)(z)
+                    results[order] = (
+                        call.block.fn(z) if order == 0 else _deriv_fn(call.block, order)(z)
+                    )
                 r = results[order]
                 vals[pos] = r[(j, *deriv)]
         out = main(tt, *xs, *vals)
@@ -109,4 +110,3 @@ def lower(
         return arr.reshape(shape)
 
     return fn
-

@@ -38,8 +38,12 @@ SECTIONS = {
     "simulation": None,  # checked by drip_cert.sim
 }
 BLOCK_KEYS = {"kind", "weights", "inputs", "outputs", "activation"}
-REQUIRED = {"system": {"name", "states", "horizon"}, "dynamics": {"f", "g"},
-            "policy": {"expert"}, "initial": {"support"}}
+REQUIRED = {
+    "system": {"name", "states", "horizon"},
+    "dynamics": {"f", "g"},
+    "policy": {"expert"},
+    "initial": {"support"},
+}
 
 
 @dataclass(frozen=True, eq=False)
@@ -97,16 +101,19 @@ def spec_from_dict(doc: Mapping[str, Any], path: Path | None = None) -> Spec:
 
     for sec, val in doc.items():
         if sec not in SECTIONS:
-            raise err(f"unknown section [{sec}]; allowed: " + ", ".join(f"[{s}]" for s in SECTIONS),
-                      sec)
+            raise err(
+                f"unknown section [{sec}]; allowed: " + ", ".join(f"[{s}]" for s in SECTIONS), sec
+            )
         if not isinstance(val, dict):
             raise err(f"[{sec}] must be a table", sec)
         keys = SECTIONS[sec]
         if keys is not None:
             extra = set(val) - keys
             if extra:
-                raise err(f"unknown key(s) {sorted(extra)} in [{sec}]; allowed: {sorted(keys)}",
-                          f"{sec}.{sorted(extra)[0]}")
+                raise err(
+                    f"unknown key(s) {sorted(extra)} in [{sec}]; allowed: {sorted(keys)}",
+                    f"{sec}.{sorted(extra)[0]}",
+                )
     for sec, req in REQUIRED.items():
         if sec not in doc:
             raise err(f"missing section [{sec}] (it needs {sorted(req)})", sec)
@@ -142,7 +149,7 @@ def spec_from_dict(doc: Mapping[str, Any], path: Path | None = None) -> Spec:
             raise err(f"block name {bname!r} clashes with a state or reserved name", fld)
         kind = bdef.get("kind", "mlp")
         if kind != "mlp":
-            raise err(f"kind {kind!r} is not supported; use kind = \"mlp\"", f"{fld}.kind")
+            raise err(f'kind {kind!r} is not supported; use kind = "mlp"', f"{fld}.kind")
         for key in ("weights", "inputs", "outputs"):
             if key not in bdef:
                 raise err(f"missing key {key!r}", f"{fld}.{key}")
@@ -168,8 +175,15 @@ def spec_from_dict(doc: Mapping[str, Any], path: Path | None = None) -> Spec:
 
     def parse(text: Any, fld: str, allow_t: bool = True) -> sp.Expr:
         sc = scalars if allow_t else {k: v for k, v in scalars.items() if k != tname}
-        return parse_expression(text, field=fld, scalars=sc, vector_name=vec_name,
-                                vector=states, blocks=blocks, path=spath)
+        return parse_expression(
+            text,
+            field=fld,
+            scalars=sc,
+            vector_name=vec_name,
+            vector=states,
+            blocks=blocks,
+            path=spath,
+        )
 
     def vector(val: Any, fld: str, length: int | None, allow_t: bool = True) -> list[sp.Expr]:
         if not isinstance(val, list) or not val:
@@ -194,8 +208,10 @@ def spec_from_dict(doc: Mapping[str, Any], path: Path | None = None) -> Spec:
             for j, v in enumerate(row):
                 e = parse(v, f"{fld}[{i}][{j}]")
                 if only_t and (e.free_symbols - {t}):
-                    raise err(f"{v!r} depends on the state; g may depend on {tname} only",
-                              f"{fld}[{i}][{j}]")
+                    raise err(
+                        f"{v!r} depends on the state; g may depend on {tname} only",
+                        f"{fld}[{i}][{j}]",
+                    )
                 prow.append(e)
             out.append(prow)
         return out
@@ -207,8 +223,9 @@ def spec_from_dict(doc: Mapping[str, Any], path: Path | None = None) -> Spec:
     diffusion = matrix(dyn["diffusion"], "dynamics.diffusion", n) if "diffusion" in dyn else None
     pol = doc["policy"]
     expert = vector(pol["expert"], "policy.expert", m, allow_t=False)
-    learned = vector(pol["learned"], "policy.learned", m, allow_t=False) if "learned" in pol \
-        else None
+    learned = (
+        vector(pol["learned"], "policy.learned", m, allow_t=False) if "learned" in pol else None
+    )
     inputs = sysd.get("inputs")
     if inputs is not None:
         inputs = _names(inputs, "system.inputs", err)
@@ -217,8 +234,7 @@ def spec_from_dict(doc: Mapping[str, Any], path: Path | None = None) -> Spec:
 
     unc = doc.get("uncertainty", {})
     lam_mu = vector(unc["drift"], "uncertainty.drift", n) if "drift" in unc else None
-    lam_sigma = matrix(unc["diffusion"], "uncertainty.diffusion", n) if "diffusion" in unc \
-        else None
+    lam_sigma = matrix(unc["diffusion"], "uncertainty.diffusion", n) if "diffusion" in unc else None
     deltas = {}
     for key in ("Delta_mu", "Delta_sigma"):
         if key in unc:
@@ -226,36 +242,63 @@ def spec_from_dict(doc: Mapping[str, Any], path: Path | None = None) -> Spec:
     if lam_mu is not None and "Delta_mu" in deltas:
         raise err("give either the drift expressions or Delta_mu, not both", "uncertainty.Delta_mu")
     if lam_sigma is not None and "Delta_sigma" in deltas:
-        raise err("give either the diffusion expressions or Delta_sigma, not both",
-                  "uncertainty.Delta_sigma")
+        raise err(
+            "give either the diffusion expressions or Delta_sigma, not both",
+            "uncertainty.Delta_sigma",
+        )
     bdim = sysd.get("brownian_dim")
     if bdim is not None:
         bdim = _posint(bdim, "system.brownian_dim", err)
     widths = {len(mat[0]) for mat in (diffusion, lam_sigma) if mat is not None}
     if len(widths) > 1:
-        raise err(f"dynamics.diffusion and uncertainty.diffusion have different column counts "
-                  f"{sorted(widths)}; both must be n x d", "uncertainty.diffusion")
+        raise err(
+            f"dynamics.diffusion and uncertainty.diffusion have different column counts "
+            f"{sorted(widths)}; both must be n x d",
+            "uncertainty.diffusion",
+        )
     if bdim is not None and widths and bdim not in widths:
-        raise err(f"brownian_dim = {bdim} but the diffusion matrices have {widths.pop()} columns",
-                  "system.brownian_dim")
+        raise err(
+            f"brownian_dim = {bdim} but the diffusion matrices have {widths.pop()} columns",
+            "system.brownian_dim",
+        )
 
     init = doc["initial"]
     horizon = sysd["horizon"]
-    if isinstance(horizon, bool) or not isinstance(horizon, int | float) or not math.isfinite(
-            float(horizon)) or float(horizon) <= 0:
+    if (
+        isinstance(horizon, bool)
+        or not isinstance(horizon, int | float)
+        or not math.isfinite(float(horizon))
+        or float(horizon) <= 0
+    ):
         raise err(f"the horizon must be a finite number > 0, got {horizon!r}", "system.horizon")
     try:
         system = System(
-            name=name.strip(), states=states, f=f, g=g, expert=expert,
-            support=init["support"], horizon=float(horizon), t=t, inputs=inputs or (),
-            learned=learned, diffusion=diffusion, lambda_mu=lam_mu, lambda_sigma=lam_sigma,
-            Delta_mu=deltas.get("Delta_mu"), Delta_sigma=deltas.get("Delta_sigma"),
-            brownian_dim=bdim, true_support=init.get("true_support"), blocks=blocks,
+            name=name.strip(),
+            states=states,
+            f=f,
+            g=g,
+            expert=expert,
+            support=init["support"],
+            horizon=float(horizon),
+            t=t,
+            inputs=inputs or (),
+            learned=learned,
+            diffusion=diffusion,
+            lambda_mu=lam_mu,
+            lambda_sigma=lam_sigma,
+            Delta_mu=deltas.get("Delta_mu"),
+            Delta_sigma=deltas.get("Delta_sigma"),
+            brownian_dim=bdim,
+            true_support=init.get("true_support"),
+            blocks=blocks,
         )
     except SpecError as exc:
         raise SpecError(str(exc), path=spath) from None
-    tables = {k: MappingProxyType(dict(doc[k])) for k in
-              ("constants", "contraction", "l1drac", "tasil", "simulation") if k in doc}
+    tables = {
+        k: MappingProxyType(dict(doc[k]))
+        for k in ("constants", "contraction", "l1drac", "tasil", "simulation")
+        if k in doc
+    }
     return Spec(path=path, system=system, tables=MappingProxyType(tables))
 
 

@@ -123,21 +123,39 @@ class System:
                 d = sp.ImmutableMatrix(mat).shape[1]
         d = n if d is None else int(d)
         if d < 1:
-            raise SpecError(f"the Brownian dimension must be >= 1, got {d}",
-                            field="system.brownian_dim")
-        p = (sp.ImmutableMatrix.zeros(n, d) if self.diffusion is None
-             else _matrix(self.diffusion, n, d, "dynamics.diffusion"))
-        lam_mu = None if self.lambda_mu is None else _matrix(self.lambda_mu, n, 1,
-                                                             "uncertainty.drift")
-        lam_sigma = None if self.lambda_sigma is None else _matrix(
-            self.lambda_sigma, n, d, "uncertainty.diffusion")
+            raise SpecError(
+                f"the Brownian dimension must be >= 1, got {d}", field="system.brownian_dim"
+            )
+        p = (
+            sp.ImmutableMatrix.zeros(n, d)
+            if self.diffusion is None
+            else _matrix(self.diffusion, n, d, "dynamics.diffusion")
+        )
+        lam_mu = (
+            None if self.lambda_mu is None else _matrix(self.lambda_mu, n, 1, "uncertainty.drift")
+        )
+        lam_sigma = (
+            None
+            if self.lambda_sigma is None
+            else _matrix(self.lambda_sigma, n, d, "uncertainty.diffusion")
+        )
         inputs = tuple(self.inputs) or tuple(f"u{i + 1}" for i in range(m))
         if len(inputs) != m:
-            raise SpecError(f"{len(inputs)} input names for an input operator with {m} columns",
-                            field="system.inputs")
-        for attr, val in (("f", f), ("g", g), ("expert", expert), ("learned", learned),
-                          ("diffusion", p), ("lambda_mu", lam_mu), ("lambda_sigma", lam_sigma),
-                          ("inputs", inputs), ("brownian_dim", d)):
+            raise SpecError(
+                f"{len(inputs)} input names for an input operator with {m} columns",
+                field="system.inputs",
+            )
+        for attr, val in (
+            ("f", f),
+            ("g", g),
+            ("expert", expert),
+            ("learned", learned),
+            ("diffusion", p),
+            ("lambda_mu", lam_mu),
+            ("lambda_sigma", lam_sigma),
+            ("inputs", inputs),
+            ("brownian_dim", d),
+        ):
             object.__setattr__(self, attr, val)
         allowed_x = set(states) | {self.t}
         self._check_symbols(f, allowed_x, "dynamics.f")
@@ -157,12 +175,14 @@ class System:
                 object.__setattr__(self, key, v)
         object.__setattr__(self, "support", _box(self.support, n, "initial.support"))
         if self.true_support is not None:
-            object.__setattr__(self, "true_support",
-                               _box(self.true_support, n, "initial.true_support"))
+            object.__setattr__(
+                self, "true_support", _box(self.true_support, n, "initial.true_support")
+            )
         T = _nonneg_float(self.horizon, "system.horizon")
         if T <= 0:
-            raise SpecError(f"the horizon must be > 0, got {self.horizon!r}",
-                            field="system.horizon")
+            raise SpecError(
+                f"the horizon must be > 0, got {self.horizon!r}", field="system.horizon"
+            )
         object.__setattr__(self, "horizon", T)
         object.__setattr__(self, "blocks", MappingProxyType(dict(self.blocks)))
         self._check_rank()
@@ -182,8 +202,10 @@ class System:
     def _check_rank(self) -> None:
         n, m = self.g.shape
         if m > n:
-            raise SpecError(f"g is {n} x {m}: more inputs than states cannot have full column "
-                            "rank", field="dynamics.g")
+            raise SpecError(
+                f"g is {n} x {m}: more inputs than states cannot have full column rank",
+                field="dynamics.g",
+            )
         for tt in self.rank_check_times():
             G = self.g_at(tt)
             if not np.all(np.isfinite(G)):
@@ -194,7 +216,9 @@ class System:
                 raise SpecError(
                     f"g({tt:g}) has rank {rank} < m = {m} columns (singular values "
                     f"{np.array2string(s, precision=3)}); DRIP Assumption 1 needs full column "
-                    "rank: remove dependent inputs", field="dynamics.g")
+                    "rank: remove dependent inputs",
+                    field="dynamics.g",
+                )
 
     # ------------------------------------------------------------------ sizes
     @property
@@ -226,8 +250,9 @@ class System:
             return self.expert
         if which == "learned":
             if self.learned is None:
-                raise SpecError("no learned policy is given (policy.learned)",
-                                field="policy.learned")
+                raise SpecError(
+                    "no learned policy is given (policy.learned)", field="policy.learned"
+                )
             return self.learned
         raise ValueError(f"policy must be 'expert' or 'learned', got {which!r}")
 
@@ -262,12 +287,24 @@ class System:
         from drip_cert.sim.model import SimModel
 
         num = self.numeric
-        return SimModel(n=self.n, m=self.m, d=self.d, f=num.f, g=num.g, p=num.p,
-                        lam_mu=num.lam_mu, lam_sigma=num.lam_sigma, expert=num.expert,
-                        learned=num.learned, theta_ad=num.theta_ad, name=self.name)
+        return SimModel(
+            n=self.n,
+            m=self.m,
+            d=self.d,
+            f=num.f,
+            g=num.g,
+            p=num.p,
+            lam_mu=num.lam_mu,
+            lam_sigma=num.lam_sigma,
+            expert=num.expert,
+            learned=num.learned,
+            theta_ad=num.theta_ad,
+            name=self.name,
+        )
 
-    def with_learned(self, learned: Sequence[sp.Expr] | sp.MatrixBase,
-                     blocks: Mapping[str, Block] | None = None) -> System:
+    def with_learned(
+        self, learned: Sequence[sp.Expr] | sp.MatrixBase, blocks: Mapping[str, Block] | None = None
+    ) -> System:
         """A copy with the learned policy replaced (and blocks added)."""
         merged = dict(self.blocks)
         merged.update(blocks or {})
@@ -275,6 +312,7 @@ class System:
 
     def to_dict(self) -> dict[str, Any]:
         """A JSON-ready description (expressions as strings)."""
+
         def strs(mat):
             return None if mat is None else [[str(e) for e in row] for row in mat.tolist()]
 
@@ -291,14 +329,16 @@ class System:
             "expert": [str(e) for e in self.expert],
             "learned": None if self.learned is None else [str(e) for e in self.learned],
             "diffusion": strs(self.diffusion),
-            "uncertainty_drift": None if self.lambda_mu is None else [str(e)
-                                                                      for e in self.lambda_mu],
+            "uncertainty_drift": None
+            if self.lambda_mu is None
+            else [str(e) for e in self.lambda_mu],
             "uncertainty_diffusion": strs(self.lambda_sigma),
             "Delta_mu_given": self.Delta_mu,
             "Delta_sigma_given": self.Delta_sigma,
             "support": [list(b) for b in self.support],
-            "true_support": None if self.true_support is None else [list(b)
-                                                                    for b in self.true_support],
+            "true_support": None
+            if self.true_support is None
+            else [list(b) for b in self.true_support],
             "blocks": [b.to_dict() for b in self.blocks.values()],
         }
 
@@ -326,16 +366,19 @@ def _box(value: Any, n: int, fieldname: str) -> tuple[tuple[float, float], ...]:
     except Exception:  # pragma: no cover
         raise SpecError(f"expected {n} pairs [lo, hi], got {value!r}", field=fieldname) from None
     if arr.shape != (n, 2):
-        raise SpecError(f"expected {n} pairs [lo, hi] (one per state), got {value!r}",
-                        field=fieldname)
+        raise SpecError(
+            f"expected {n} pairs [lo, hi] (one per state), got {value!r}", field=fieldname
+        )
     out = []
     for i, (lo, hi) in enumerate(arr):
         for v in (lo, hi):
             if isinstance(v, bool) or not isinstance(v, int | float | np.floating | np.integer):
                 raise SpecError(f"bound {v!r} of state {i} is not a number", field=fieldname)
             if not math.isfinite(float(v)):
-                raise SpecError(f"bound {v!r} of state {i} is not finite: the support must be a "
-                                "bounded box", field=fieldname)
+                raise SpecError(
+                    f"bound {v!r} of state {i} is not finite: the support must be a bounded box",
+                    field=fieldname,
+                )
         if float(lo) > float(hi):
             raise SpecError(f"interval {i} is empty: lo = {lo} > hi = {hi}", field=fieldname)
         out.append((float(lo), float(hi)))
@@ -372,10 +415,14 @@ class NumericSystem:
         f = s.lower(list(s.f))
         g_fn = s.lower(s.g)
         p = s.lower(s.diffusion)
-        lam_mu = (s.lower(list(s.lambda_mu)) if s.lambda_mu is not None
-                  else (lambda t, x: jnp.zeros(n)))
-        lam_sigma = (s.lower(s.lambda_sigma) if s.lambda_sigma is not None
-                     else (lambda t, x: jnp.zeros((n, d))))
+        lam_mu = (
+            s.lower(list(s.lambda_mu)) if s.lambda_mu is not None else (lambda t, x: jnp.zeros(n))
+        )
+        lam_sigma = (
+            s.lower(s.lambda_sigma)
+            if s.lambda_sigma is not None
+            else (lambda t, x: jnp.zeros((n, d)))
+        )
         exp_fn = s.lower(list(s.expert))
         learned = None if s.learned is None else s.lower(list(s.learned))
         jac_e = s.lower(s.closed_loop_jacobian("expert"))

@@ -14,7 +14,10 @@ from drip_cert.learn.mlp import init_mlp
 SEED = 4
 mlp = init_mlp([4, 16, 4], np.random.default_rng(SEED), activation="tanh")
 # non-zero biases so that h(0) != 0 (a generic network, not an odd function)
-mlp = type(mlp)(mlp.weights, tuple(np.random.default_rng(SEED + 1).normal(scale=0.3, size=b.shape)
-                                   for b in mlp.biases), "tanh")
+mlp = type(mlp)(
+    mlp.weights,
+    tuple(np.random.default_rng(SEED + 1).normal(scale=0.3, size=b.shape) for b in mlp.biases),
+    "tanh",
+)
 mlp.save(Path(__file__).with_name("h.npz"))
 print("wrote", Path(__file__).with_name("h.npz"), "sizes", mlp.sizes)
