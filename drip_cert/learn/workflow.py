@@ -179,6 +179,20 @@ def jacobian_lipschitz(s: System, which: str, box: np.ndarray | None = None) -> 
     from drip_cert.learn.mlp_bounds import jacobian_lipschitz_bound
 
     pol = sp.Matrix(s.policy(which))
+    jump = _jacobian_jump(pol, s, box)
+    if jump is not None:
+        return Quantity(
+            f"L_dpi_{which}",
+            math.inf,
+            How.SOUND,
+            "DRIP Assumption PolicyRegularity (b)",
+            f"the Jacobian of pi is discontinuous where {jump} = 0"
+            + ("" if box is None else " (which the box may contain)")
+            + ": pi is not C^1 there, its Jacobian has no Lipschitz constant and the "
+            "assumption fails (smooth the policy, e.g. sqrt(x^2 + eps^2) for Abs(x))",
+        )
+    if box is not None and not s.blocks:
+        pol = _drop_inactive_kinks(pol, s, box)
     dec = affine_in_blocks(pol, s)
     if dec is not None and all(s.blocks[b].mlp is not None for b in dec.C):
         if not dec.C:
@@ -247,6 +261,54 @@ def jacobian_lipschitz(s: System, which: str, box: np.ndarray | None = None) -> 
         "sampled sup ||d^2 pi||_F on the support box enlarged by 1 (4096 points, "
         "seed 0): an estimate, not a bound",
     )
+
+
+def _kinks(pol: sp.Matrix, s: System) -> list[sp.Expr]:
+    """Arguments ``a`` where the Jacobian of ``pol`` may jump: ``sign(a)``, ``Heaviside(a)``."""
+    jac = pol.jacobian(list(s.states))
+    args: list[sp.Expr] = []
+    for e in jac:
+        for atom in e.atoms(sp.sign, sp.Heaviside):
+            if atom.args[0] not in args:
+                args.append(atom.args[0])
+    return args
+
+
+def _jacobian_jump(pol: sp.Matrix, s: System, box: np.ndarray | None) -> str | None:
+    """The first kink argument of ``pol``'s Jacobian that may vanish on ``box`` (anywhere when
+    ``box`` is None), as text; ``None`` when the Jacobian is continuous there.
+
+    ``Abs``, ``Max``, ``Min`` (the only non-smooth functions a spec can write) differentiate to
+    ``sign``/``Heaviside`` of an argument; the Jacobian jumps where that argument changes sign.
+    On a box the argument is enclosed rigorously: an enclosure that excludes 0 proves the
+    Jacobian continuous there; one that contains 0 is reported (possibly pessimistically).
+    """
+    from drip_cert.analysis.interval import UnsupportedExpression, enclose_expr
+
+    for a in _kinks(pol, s):
+        if box is None:
+            return str(a)
+        try:
+            lo, hi = enclose_expr(
+                a, list(s.states), [tuple(b) for b in np.asarray(box, dtype=float)]
+            )
+        except UnsupportedExpression:
+            return str(a)
+        if lo <= 0.0 <= hi:
+            return str(a)
+    return None
+
+
+def _drop_inactive_kinks(pol: sp.Matrix, s: System, box: np.ndarray) -> sp.Matrix:
+    """Replace ``Abs(a)`` by ``a`` or ``-a`` where ``a`` keeps one sign on ``box`` (proved by
+    :func:`_jacobian_jump` before), so that the second derivatives have no ``DiracDelta``."""
+    from drip_cert.analysis.interval import enclose_expr
+
+    def fix(a):
+        lo, _ = enclose_expr(a, list(s.states), [tuple(b) for b in np.asarray(box, dtype=float)])
+        return a if lo > 0.0 else -a
+
+    return pol.replace(sp.Abs, fix)
 
 
 # ------------------------------------------------------------------ h_0, h_1 along trajectories
@@ -353,6 +415,21 @@ def tasil_section(
     if "box only" in L_il.note or "box only" in L_ex.note:
         R = min(R, margin)
     L_Delta = L_il.value + L_ex.value
+    provenance = {
+        "L_dpi_learned": L_il.to_dict(),
+        "L_dpi_expert": L_ex.to_dict(),
+        "gamma0": gamma0.to_dict(),
+    }
+    if not math.isfinite(L_Delta):
+        return _not_lipschitz(
+            L_il if not math.isfinite(L_il.value) else L_ex,
+            train,
+            heldout,
+            gamma0,
+            R,
+            settings,
+            method,
+        ), provenance
     h_train, how_t = trajectory_h(s, train, L_Delta, contraction_global)
     h_val, _ = (
         trajectory_h(s, heldout, L_Delta, contraction_global)
@@ -376,10 +453,38 @@ def tasil_section(
         method=method,
         continuous=True,
     )
-    provenance = {
-        "L_dpi_learned": L_il.to_dict(),
-        "L_dpi_expert": L_ex.to_dict(),
-        "h_how": how_t.value,
-        "gamma0": gamma0.to_dict(),
-    }
+    provenance["h_how"] = how_t.value
     return cert, provenance
+
+
+def _not_lipschitz(
+    L: Quantity, train, heldout, gamma0: Quantity, R: float, settings: TasilSettings, method: str
+):
+    """The TaSIL certificate when a policy's Jacobian has no Lipschitz constant: every form
+    fails (DRIP Assumption PolicyRegularity (b)); ``h_0``, ``h_1`` are not computed (their sound
+    continuous-time sups need ``L_Delta``)."""
+    from drip_cert.bounds.tasil import FORMS, TasilCertificate, TasilForm
+
+    why = f"DRIP Assumption PolicyRegularity (b) fails for {L.name}: {L.note}"
+    forms = tuple(TasilForm(name, math.inf, False, True, "not computed: " + why) for name in FORMS)
+    return TasilCertificate(
+        method=method,
+        h0=math.nan,
+        h1=math.nan,
+        gamma0=gamma0.value,
+        L_Delta=math.inf,
+        eta=settings.eta,
+        R=R,
+        gap_bound=math.inf,
+        gap_reason=why,
+        rho=math.inf,
+        rho_form="held_out" if heldout is not None else "drip_shaped",
+        delta=settings.delta,
+        n=int(train.states.shape[0]),
+        n_val=0 if heldout is None else int(heldout.states.shape[0]),
+        tau0=math.nan,
+        tau1=math.nan,
+        forms=forms,
+        vacuous_forms=FORMS,
+        continuous=True,
+    )

@@ -1,0 +1,80 @@
+"""DRIP Assumption PolicyRegularity (b): a policy whose Jacobian jumps has no L_dpi, and says so."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from drip_cert.cli import main
+from drip_cert.learn.mlp import init_mlp
+from drip_cert.learn.workflow import jacobian_lipschitz
+from drip_cert.provenance import How
+from drip_cert.system.spec import load_spec
+
+BOX = np.array([[-1.0, 1.0], [-1.0, 1.0]])
+
+SPEC = """
+[system]
+name = "kinked-expert"
+states = ["x1", "x2"]
+inputs = ["u"]
+horizon = 3.0
+
+[dynamics]
+f = ["-x1 + 0.5*sin(x2)", "-x2"]
+g = [["0"], ["1"]]
+
+[policy]
+expert = ["{expert}"]
+{learned}
+
+[initial]
+support = [[-1.0, 1.0], [-1.0, 1.0]]
+{extra}
+"""
+
+
+def _system(tmp_path, expert: str, learned: str = "", extra: str = ""):
+    path = tmp_path / "spec.toml"
+    path.write_text(SPEC.format(expert=expert, learned=learned, extra=extra))
+    return load_spec(path).system, path
+
+
+@pytest.mark.parametrize("box", [BOX, None])
+def test_abs_through_the_box_has_no_jacobian_lipschitz_constant(tmp_path, box):
+    s, _ = _system(tmp_path, "-0.5*x2 - 0.2*Abs(x2)")
+    q = jacobian_lipschitz(s, "expert", box)
+    assert math.isinf(q.value) and q.how == How.SOUND
+    assert "discontinuous where x2 = 0" in q.note and "not C^1" in q.note
+
+
+def test_abs_with_its_kink_outside_the_box_equals_the_smooth_branch(tmp_path):
+    """Abs(x2 - 5) = 5 - x2 on [-1, 1]^2: both spellings get the same sound bound."""
+    kinked, _ = _system(tmp_path, "-0.5*x2 - 0.2*x2**3 + 0.1*Abs(x2 - 5)")
+    smooth, _ = _system(tmp_path, "-0.5*x2 - 0.2*x2**3 + 0.1*(5 - x2)")
+    a = jacobian_lipschitz(kinked, "expert", BOX)
+    b = jacobian_lipschitz(smooth, "expert", BOX)
+    assert a.how == b.how == How.SOUND
+    assert a.value == b.value
+    # d^2/dx2^2 of -0.2 x2^3 is -1.2 x2: |.| <= 1.2 on the box, and the bound is that
+    assert a.value == pytest.approx(1.2, rel=1e-9)
+    # without a box the kink may be reached: no constant
+    assert math.isinf(jacobian_lipschitz(kinked, "expert", None).value)
+
+
+def test_certify_reports_the_failing_assumption(tmp_path, capsys):
+    rng = np.random.default_rng(0)
+    init_mlp([2, 8, 1], rng, scale=0.1).save(tmp_path / "policy.npz")
+    learned = 'learned = ["pi_il(x1, x2)[0]"]'
+    extra = (
+        '[blocks.pi_il]\nkind = "mlp"\nweights = "policy.npz"\ninputs = 2\noutputs = 1\n\n'
+        "[tasil]\ntrajectories = 4\nheldout = 2\nsamples = 20\n"
+    )
+    _, path = _system(tmp_path, "-0.5*x2 - 0.2*Abs(x2)", learned, extra)
+    rc = main(["certify", str(path)])
+    out = capsys.readouterr().out
+    assert rc == 1
+    assert "PolicyRegularity (b) fails for L_dpi_expert" in out
+    assert "discontinuous where x2 = 0" in out
