@@ -19,6 +19,7 @@ import dataclasses
 import math
 import resource
 import time
+from collections.abc import Callable
 
 import numpy as np
 
@@ -82,13 +83,28 @@ def x0_sampler(key):
     return jax.random.uniform(key, (N,), minval=-1.0, maxval=1.0)
 
 
-def numpy_loop(h: MLP, pol: MLP, l1: L1Params, n_paths: int, n_steps: int, seed: int) -> float:
-    """Seconds for the learned + L1-DRAC true SDE, all paths stepped together in numpy."""
+def numpy_loop(
+    h: MLP,
+    pol: MLP,
+    l1: L1Params,
+    n_paths: int,
+    n_steps: int,
+    seed: int,
+    x0: np.ndarray | None = None,
+    noise: Callable[[int], np.ndarray] | None = None,
+) -> tuple[float, np.ndarray]:
+    """Seconds for the learned + L1-DRAC true SDE, all paths stepped together in numpy, and
+    the final states ``(n_paths, 4)``.
+
+    ``x0`` and ``noise(j) -> (n_paths, 4)`` (standard normals) replace numpy's own draws; the
+    tests pass the engine's, and the two implementations must then end in the same states up to
+    rounding.
+    """
     rng = np.random.default_rng(seed)
     dt = l1.dt
     g = 0.25 * np.eye(N)
     theta = np.linalg.solve(g.T @ g, g.T)
-    x = rng.uniform(-1.0, 1.0, size=(n_paths, N))
+    x = rng.uniform(-1.0, 1.0, size=(n_paths, N)) if x0 is None else np.array(x0, dtype=float)
     x_hat = x.copy()
     eta = np.zeros((n_paths, N))
     lam_hat = np.zeros((n_paths, N))
@@ -105,10 +121,11 @@ def numpy_loop(h: MLP, pol: MLP, l1: L1Params, n_paths: int, n_steps: int, seed:
         nrm = np.sqrt(np.sum(x * x, axis=1, keepdims=True))
         drift = fk + u @ g.T + (0.1 + 0.05 * nrm)
         sig = 0.1 + 0.05 * np.sqrt(nrm)
-        x = x + dt * drift + sig * (sq * rng.standard_normal((n_paths, N)))
+        z = rng.standard_normal((n_paths, N)) if noise is None else noise(j)
+        x = x + dt * drift + sig * (sq * z)
     elapsed = time.perf_counter() - t0
     assert np.all(np.isfinite(x))
-    return elapsed
+    return elapsed, x
 
 
 def _jax_normals(key, idx, j):
@@ -239,7 +256,7 @@ def main(argv: list[str] | None = None) -> int:
     if not args.no_profile:
         _ablation(cfg)
         _micro(pol, n_paths, min(n_steps, 500))
-    t_np = numpy_loop(h, pol, l1, n_paths, n_steps, seed=0)
+    t_np, _ = numpy_loop(h, pol, l1, n_paths, n_steps, seed=0)
     npr = n_paths * n_steps / t_np
     print(f"  numpy loop: {t_np:.2f} s")
     print(f"engine {eng:.1e} steps/s, numpy {npr:.1e} steps/s, ratio {eng / npr:.1f}x")

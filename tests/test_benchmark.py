@@ -1,0 +1,74 @@
+"""The throughput benchmark: its numpy baseline computes what the engine computes, and it runs."""
+
+from __future__ import annotations
+
+import importlib.util
+import math
+import re
+from pathlib import Path
+
+import numpy as np
+
+from drip_cert._jax import jax, jnp
+from drip_cert.control.l1drac import L1Params
+from drip_cert.sim.engine import SimConfig, build_chunk_fn
+from drip_cert.sim.noise import normals
+
+_PATH = Path(__file__).resolve().parents[1] / "benchmarks" / "mc_throughput.py"
+_spec = importlib.util.spec_from_file_location("mc_throughput", _PATH)
+bench = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(bench)
+
+# float64 rounding of the same operations in another order, grown over 1000 steps: observed
+# 3e-15; 1e-10 leaves room and still fails on any modelling difference (another filter
+# bandwidth, omega 40 instead of 50, moves the end states by 7.6e-3, checked below)
+SAME_PATH_TOL = 1e-10
+
+
+def _engine_run(paths: int, n_steps: int, dt: float, seed: int):
+    model, h, pol = bench.build_system(0)
+    l1 = L1Params(omega=50.0, lambda_s=10.0, Ts=10 * dt, dt=dt)
+    cfg = SimConfig(
+        T=n_steps * dt,
+        dt=dt,
+        n_paths=paths,
+        seed=seed,
+        chunk_size=paths,
+        scenarios=("learned_l1_true",),
+        l1=l1,
+        record_every=n_steps,
+        n_sample_paths=0,
+    )
+    idx = jnp.arange(paths, dtype=jnp.uint32)
+    recs, codes = build_chunk_fn(model, cfg, bench.x0_sampler)(idx)
+    assert not np.any(np.asarray(codes))
+    recs = np.asarray(recs)
+    k_bm = jax.random.fold_in(jax.random.PRNGKey(seed), 2)  # the engine's Brownian key
+    z = jax.jit(lambda j: normals(k_bm, idx, j, 4))
+
+    def noise(j):
+        return np.asarray(z(jnp.uint32(j)))
+
+    return h, pol, l1, recs[0, 0], recs[-1, 0], noise
+
+
+def test_numpy_baseline_computes_what_the_engine_computes():
+    """Fed the engine's initial states and normals, the numpy loop ends in the same states."""
+    paths, n_steps, dt = 64, 1000, 1e-3
+    h, pol, l1, x0, x_eng, noise = _engine_run(paths, n_steps, dt, seed=3)
+    _, x_np = bench.numpy_loop(h, pol, l1, paths, n_steps, seed=0, x0=x0, noise=noise)
+    assert np.max(np.abs(x_np - x_eng)) < SAME_PATH_TOL
+    # the comparison can fail: another L1 filter bandwidth moves the end states visibly
+    other = L1Params(omega=40.0, lambda_s=10.0, Ts=10 * dt, dt=dt)
+    _, x_other = bench.numpy_loop(h, pol, other, paths, n_steps, seed=0, x0=x0, noise=noise)
+    assert np.max(np.abs(x_other - x_eng)) > 1e3 * SAME_PATH_TOL
+
+
+def test_benchmark_runs_and_prints_its_ratio_line(capsys):
+    assert bench.main(["--paths", "256", "--T", "0.02", "--no-profile"]) == 0
+    last = capsys.readouterr().out.strip().splitlines()[-1]
+    m = re.fullmatch(r"engine (\S+) steps/s, numpy (\S+) steps/s, ratio (\S+)x", last)
+    assert m is not None, last
+    eng, npy, ratio = (float(v) for v in m.groups())
+    assert eng > 0 and npy > 0
+    assert math.isclose(ratio, eng / npy, rel_tol=0.1)  # printed with 2 significant digits
