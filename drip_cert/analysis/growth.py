@@ -796,19 +796,24 @@ def _estimate_note(extra: str) -> str:
     )
 
 
+def _unevaluable(name: str, source: str) -> Quantity:
+    """The constant when no sound route applies and ``F`` cannot be evaluated either."""
+    return Quantity(
+        name,
+        math.nan,
+        How.ESTIMATE,
+        source,
+        "no sound route applies and F cannot be evaluated numerically; give the "
+        "constant in [constants]",
+    )
+
+
 def _growth_estimate(
     ctx: _Context, p: sp.Rational, name: str, source: str, evaluate: Evaluator | None
 ) -> Quantity:
     fn = _numeric(ctx, evaluate)
     if fn is None:
-        return Quantity(
-            name,
-            math.nan,
-            How.ESTIMATE,
-            source,
-            "no sound route applies and F cannot be evaluated numerically; give the "
-            "constant in [constants]",
-        )
+        return _unevaluable(name, source)
     n = len(ctx.xs)
     X = sample_points(n)
     radii = np.linalg.norm(X, axis=1)
@@ -839,14 +844,7 @@ def _holder_estimate(
 ) -> Quantity:
     fn = _numeric(ctx, evaluate)
     if fn is None:
-        return Quantity(
-            name,
-            math.nan,
-            How.ESTIMATE,
-            source,
-            "no sound route applies and F cannot be evaluated numerically; give the "
-            "constant in [constants]",
-        )
+        return _unevaluable(name, source)
     n = len(ctx.xs)
     rng = np.random.default_rng(SAMPLE_SEED + 1)
     A = sample_points(n)
