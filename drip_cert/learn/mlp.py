@@ -112,23 +112,19 @@ class MLP:
         """Evaluate with jax.numpy on ``x`` of shape ``(..., in_dim)`` (traceable).
 
         With ``in_dim <= 8`` and a hidden layer, the first layer is written as ``in_dim``
-        broadcast multiply-adds instead of a matrix product: XLA's CPU backend runs a product
-        with such a short inner dimension far below its FMA throughput, while the broadcast form
-        fuses with the bias and the activation. Same value up to summation order; the
-        Monte-Carlo benchmark measured ~10 ns less per path-step (of ~230) on the 4-64-64-4
-        policy. Training differentiates :func:`apply_params`, which keeps the product.
+        broadcast multiply-adds instead of a matrix product (``apply_params(...,
+        narrow_first=True)``): XLA's CPU backend runs a product with such a short inner dimension
+        far below its FMA throughput, while the broadcast form fuses with the bias and the
+        activation. Same value up to summation order; the Monte-Carlo benchmark measured ~10 ns
+        less per path-step (of ~230) on the 4-64-64-4 policy. Training differentiates
+        :func:`apply_params` with the plain product (the broadcast form was ~25 % slower there).
         """
         from drip_cert._jax import jnp
 
         params = [(jnp.asarray(w), jnp.asarray(b)) for w, b in self.params()]
-        w0, b0 = params[0]
-        if w0.shape[1] > _NARROW_INPUT or len(params) == 1:
-            return apply_params(params, x, self.activation, self.output_activation, xp=jnp)
-        h = b0 + x[..., 0:1] * w0[:, 0]
-        for i in range(1, w0.shape[1]):
-            h = h + x[..., i : i + 1] * w0[:, i]
-        h = activation_fn(self.activation, jnp)(h)
-        return apply_params(params[1:], h, self.activation, self.output_activation, xp=jnp)
+        return apply_params(
+            params, x, self.activation, self.output_activation, xp=jnp, narrow_first=True
+        )
 
     def save(self, path: str | Path) -> None:
         """Write ``path`` (.npz) and the metadata ``path.with_suffix('.json')`` atomically."""
@@ -151,13 +147,30 @@ def activation_fn(name: str | None, xp):
     raise SpecError(f"activation {name!r} is not one of {ACTIVATIONS}")
 
 
-def apply_params(params, x, activation: str, output_activation: str | None = None, xp=np):
-    """Forward pass of the parameter pytree ``[(W, b), ...]`` on ``x`` of shape ``(..., in)``."""
+def apply_params(
+    params,
+    x,
+    activation: str,
+    output_activation: str | None = None,
+    xp=np,
+    narrow_first: bool = False,
+):
+    """Forward pass of the parameter pytree ``[(W, b), ...]`` on ``x`` of shape ``(..., in)``.
+
+    ``narrow_first``: write a first HIDDEN layer with at most ``_NARROW_INPUT`` inputs as
+    broadcast multiply-adds (see :meth:`MLP.apply_jax`); same value up to summation order.
+    """
     act = activation_fn(activation, xp)
     h = x
     last = len(params) - 1
     for i, (w, b) in enumerate(params):
-        h = h @ w.T + b
+        if i == 0 and narrow_first and i < last and w.shape[1] <= _NARROW_INPUT:
+            z = b + h[..., 0:1] * w[:, 0]
+            for k in range(1, w.shape[1]):
+                z = z + h[..., k : k + 1] * w[:, k]
+            h = z
+        else:
+            h = h @ w.T + b
         if i < last:
             h = act(h)
     if output_activation is not None:
