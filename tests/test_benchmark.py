@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import importlib.util
-import math
 import re
 from pathlib import Path
 
@@ -71,4 +70,7 @@ def test_benchmark_runs_and_prints_its_ratio_line(capsys):
     assert m is not None, last
     eng, npy, ratio = (float(v) for v in m.groups())
     assert eng > 0 and npy > 0
-    assert math.isclose(ratio, eng / npy, rel_tol=0.1)  # printed with 2 significant digits
+    # the rates are printed with 2 significant digits (each within 5 % of the true rate, so
+    # their quotient within 11 %), the ratio with one decimal (within 0.05)
+    q = eng / npy
+    assert abs(ratio - q) <= 0.05 + 0.11 * q
