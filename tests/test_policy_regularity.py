@@ -64,6 +64,15 @@ def test_abs_with_its_kink_outside_the_box_equals_the_smooth_branch(tmp_path):
     assert math.isinf(jacobian_lipschitz(kinked, "expert", None).value)
 
 
+def test_a_kink_off_the_box_gives_no_global_constant(tmp_path):
+    """Affine on the box (Abs(x2 - 5) = 5 - x2) but not on R^2: the zero bound holds on the box
+    only and must say so (the tube radius is then capped), not claim 'affine policy' globally."""
+    s, _ = _system(tmp_path, "-0.5*x2 + 0.1*Abs(x2 - 5)")
+    q = jacobian_lipschitz(s, "expert", BOX)
+    assert q.how == How.SOUND and q.value == 0.0
+    assert "box only" in q.note and "affine policy" not in q.note
+
+
 def test_certify_reports_the_failing_assumption(tmp_path, capsys):
     rng = np.random.default_rng(0)
     init_mlp([2, 8, 1], rng, scale=0.1).save(tmp_path / "policy.npz")

@@ -179,7 +179,7 @@ def jacobian_lipschitz(s: System, which: str, box: np.ndarray | None = None) -> 
     from drip_cert.learn.mlp_bounds import jacobian_lipschitz_bound
 
     pol = sp.Matrix(s.policy(which))
-    jump = _jacobian_jump(pol, s, box)
+    jump, branch = _kink_branches(pol, s, box)
     if jump is not None:
         return Quantity(
             f"L_dpi_{which}",
@@ -191,9 +191,8 @@ def jacobian_lipschitz(s: System, which: str, box: np.ndarray | None = None) -> 
             + ": pi is not C^1 there, its Jacobian has no Lipschitz constant and the "
             "assumption fails (smooth the policy, e.g. sqrt(x^2 + eps^2) for Abs(x))",
         )
-    if box is not None and not s.blocks:
-        pol = _drop_inactive_kinks(pol, s, box)
-    dec = affine_in_blocks(pol, s)
+    # a kink kept off the box by its enclosure is still a kink elsewhere: no global route then
+    dec = affine_in_blocks(pol, s) if branch is None else None
     if dec is not None and all(s.blocks[b].mlp is not None for b in dec.C):
         if not dec.C:
             return Quantity(
@@ -221,9 +220,11 @@ def jacobian_lipschitz(s: System, which: str, box: np.ndarray | None = None) -> 
     if box is not None and not s.blocks:
         from drip_cert.analysis.interval import UnsupportedExpression, enclose_expr
 
+        # on the box each Abs(a) is its smooth branch +-a (no DiracDelta in d^2 pi)
+        pol_box = pol if branch is None else pol.replace(sp.Abs, branch)
         try:
             acc = 0.0
-            for e in pol:
+            for e in pol_box:
                 for xi in s.states:
                     for xj in s.states:
                         lo, hi = enclose_expr(
@@ -274,41 +275,34 @@ def _kinks(pol: sp.Matrix, s: System) -> list[sp.Expr]:
     return args
 
 
-def _jacobian_jump(pol: sp.Matrix, s: System, box: np.ndarray | None) -> str | None:
-    """The first kink argument of ``pol``'s Jacobian that may vanish on ``box`` (anywhere when
-    ``box`` is None), as text; ``None`` when the Jacobian is continuous there.
+def _kink_branches(pol: sp.Matrix, s: System, box: np.ndarray | None):
+    """``(jump, branch)`` for the kinks of ``pol``'s Jacobian on ``box``.
 
     ``Abs``, ``Max``, ``Min`` (the only non-smooth functions a spec can write) differentiate to
     ``sign``/``Heaviside`` of an argument; the Jacobian jumps where that argument changes sign.
-    On a box the argument is enclosed rigorously: an enclosure that excludes 0 proves the
-    Jacobian continuous there; one that contains 0 is reported (possibly pessimistically).
+    On a box each argument is enclosed rigorously. ``jump`` is the text of the first argument
+    whose enclosure contains 0 (possibly pessimistically; any argument when ``box`` is None),
+    else None. ``branch`` is None without kinks; when every kink is proved off the box it maps
+    an ``Abs`` argument ``a`` to its branch there (``a`` or ``-a``), for ``pol.replace``.
     """
     from drip_cert.analysis.interval import UnsupportedExpression, enclose_expr
 
+    signs: dict[sp.Expr, int] = {}
     for a in _kinks(pol, s):
         if box is None:
-            return str(a)
+            return str(a), None
         try:
             lo, hi = enclose_expr(
                 a, list(s.states), [tuple(b) for b in np.asarray(box, dtype=float)]
             )
         except UnsupportedExpression:
-            return str(a)
+            return str(a), None
         if lo <= 0.0 <= hi:
-            return str(a)
-    return None
-
-
-def _drop_inactive_kinks(pol: sp.Matrix, s: System, box: np.ndarray) -> sp.Matrix:
-    """Replace ``Abs(a)`` by ``a`` or ``-a`` where ``a`` keeps one sign on ``box`` (proved by
-    :func:`_jacobian_jump` before), so that the second derivatives have no ``DiracDelta``."""
-    from drip_cert.analysis.interval import enclose_expr
-
-    def fix(a):
-        lo, _ = enclose_expr(a, list(s.states), [tuple(b) for b in np.asarray(box, dtype=float)])
-        return a if lo > 0.0 else -a
-
-    return pol.replace(sp.Abs, fix)
+            return str(a), None
+        signs[a] = 1 if lo > 0.0 else -1
+    if not signs:
+        return None, None
+    return None, lambda a: signs[a] * a if a in signs else sp.Abs(a)
 
 
 # ------------------------------------------------------------------ h_0, h_1 along trajectories
