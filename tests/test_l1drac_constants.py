@@ -48,7 +48,7 @@ def random_constants(rng: np.random.Generator, **fixed: float) -> L1Constants:
             d[n] = bool(rng.integers(0, 2))
         else:
             d[n] = float(rng.uniform(0.1, 2.0))
-    d["lambda"] = float(rng.uniform(3.0, 20.0))  # > Delta_g_perp * max(...) <= 4
+    d["lambda"] = float(rng.uniform(4.0, 20.0))  # >= 4 > Delta_g_perp * max(...), each < 2
     d["p_star"] = 8
     d.update(fixed)
     return L1Constants.from_mapping(d)
@@ -138,6 +138,8 @@ def test_report_is_json_ready() -> None:
         assert k in back
     assert [c["eq"] for c in back["conditions"]] == ["16a", "16b", "21a", "21b", "24"]
     assert back["feasible"] is True
+    assert back["verified"] is True and all(c["verified"] for c in back["conditions"])
+    assert back["verification"]["min_margin_lo"] > 0.0
 
 
 # ------------------------------------------------------------------ closed forms

@@ -193,6 +193,9 @@ def test_design_finds_and_rechecks(c) -> None:
     again = L.evaluate_conditions(c, 2, d.omega, d.lambda_s, d.Ts, d.rho_r, d.rho_a)
     assert again == d.conditions
     assert d.rho == d.rho_r + d.rho_a
+    # every condition verified in Arb with a strictly positive margin, off the float roots
+    assert d.verified and all(r.verified and r.margin_lo > 0 for r in d.conditions)
+    assert set(dict(d.backoff)) == {"rho_r", "rho_a", "Ts"}
     assert dict(d.how) == {
         "omega": "given",
         "lambda_s": "given",
@@ -206,9 +209,10 @@ def test_all_fixed_only_evaluates_and_infeasible_is_a_result(c) -> None:
     req = DesignRequest(p=1, lambda_s=100.0, omega=1e3, Ts=1e-9, rho_r=3.0, rho_a=1.0)
     d = design(c, req)
     assert d.conditions == L.evaluate_conditions(c, 1, 1e3, 100.0, 1e-9, 3.0, 1.0)
-    assert d.feasible
+    assert d.feasible and d.verified and d.backoff == ()  # fixed inputs are never moved
     bad = design(c, dataclasses.replace(req, rho_r=1.0))
     assert not bad.feasible and "(16a) fails by" in bad.reason
+    assert bad.conditions[0].margin_hi < 0  # Arb proves the failure
     slow = design(c, dataclasses.replace(req, Ts=1e-3))
     assert not slow.feasible and "(24)" in slow.reason and "(16a)" not in slow.reason
     js = bad.to_dict()

@@ -9,7 +9,8 @@ Public surface
 --------------
 * :class:`L1Constants` -- the constants of Assumptions 1-8 plus alpha, eps_r, eps_a (validated).
 * :class:`DesignRequest` -- p, lambda_s and whichever of omega, Ts, rho_r, rho_a are fixed.
-* :class:`ConditionResult` -- one condition in the paper's form, with a signed margin.
+* :class:`ConditionResult` -- one condition in the paper's form, with a signed float margin and
+  its Arb-verified enclosure (:mod:`drip_cert.bounds.l1drac_verify`).
 * :func:`evaluate_conditions` -- (16a), (16b), (21a), (21b), (24) at a fully specified point.
 * :func:`smallest_rho_r`, :func:`smallest_rho_a`, :func:`largest_Ts` -- the three root searches.
 * :func:`design` -- find the free parameters; returns an :class:`L1Design` (never raises for an
@@ -27,35 +28,74 @@ rests on a point that fails its own re-check; it is minimal (maximal for Ts) to 
 ``ROOT_RTOL``. Why bisection is correct: see :func:`smallest_rho_r`, :func:`smallest_rho_a` and
 :func:`largest_Ts`, which prove that each feasible set is an interval reaching to infinity (to
 zero for Ts).
+
+Back-off and rigorous verification
+----------------------------------
+A float root sits on the boundary of its condition: its float64 margin is rounding noise, whose
+sign another transcription may flip. :func:`design` therefore never returns a root as found. It
+moves each *free* parameter into the interior by a relative ``f = BACKOFF_START`` (rho_r and
+rho_a multiplied by ``1 + f``, Ts divided by ``1 + f``), in the order rho_r, rho_a, Ts (rho_a
+and Ts are re-solved after the parameters before them moved), and re-checks the conditions that
+parameter closes in Arb ball arithmetic (:func:`drip_cert.bounds.l1drac_verify.verify_conditions`,
+the same formulas) and in float64; unless the margin ball's lower end is > 0 and the float64
+margin is positive too, it retries with ``f`` multiplied by ``BACKOFF_GROWTH``, at most
+``BACKOFF_STEPS`` times (so ``f <= 1e-3``), and otherwise reports the design infeasible with the
+reason (details in :func:`_back_off`). Every feasible set is an up-set in rho_r and rho_a and,
+on the monotone envelope of (24), a down-set in Ts (the proofs in :func:`smallest_rho_r`,
+:func:`smallest_rho_a`, :func:`largest_Ts`), so a step into the interior keeps every condition
+and makes its margin strictly positive. Parameters the user fixed are never changed: for them
+the verdict is the Arb-verified one. ``feasible`` means every condition is *verified* (the
+exact margin at the returned float values is > 0), not merely that its float64 margin is.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import numbers
 import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, ClassVar
 
 from drip_cert.bounds.l1drac_appendix import (
+    FLOAT,
+    RELATIONS,
+    FloatOps,
     RefConstants,
     TrueConstants,
-    gamma_a,
+    budget_a,
     gamma_r,
+    margin_of,
     reference_constants,
     sampling_constants,
-    theta_a,
+    sides_16a,
+    sides_16b,
+    sides_21a,
+    sides_21b,
+    sides_24,
     theta_r,
     true_constants,
+    unmatched_gain_a,
+    unmatched_gain_r,
     upsilon_sum,
 )
+from drip_cert.bounds.l1drac_verify import (
+    ARB_PREC,
+    ArbMargin,
+    budget_24_lower,
+    verify_conditions,
+)
 from drip_cert.errors import AssumptionViolation, SpecError
-from drip_cert.provenance import json_float
+from drip_cert.provenance import How, json_float, weakest
 
 __all__ = [
     "CONSTANT_NAMES",
     "ROOT_RTOL",
+    "BACKOFF_START",
+    "BACKOFF_GROWTH",
+    "BACKOFF_STEPS",
+    "VERIFY_METHOD",
     "L1Constants",
     "DesignRequest",
     "ConditionResult",
@@ -79,6 +119,21 @@ __all__ = [
 
 #: Relative tolerance of every root search (the returned root is within this of the true one).
 ROOT_RTOL = 1e-12
+#: First relative back-off of a free parameter from its float root: 1000 x ROOT_RTOL, so that it
+#: clears the root's own uncertainty and the float64 rounding of the margins (~1e-16 relative)
+#: by orders of magnitude, while moving rho by a negligible 1e-9 relative.
+BACKOFF_START = 1e-9
+#: Factor by which the relative back-off grows at each retry (geometric: a few retries span any
+#: plausible loss of digits).
+BACKOFF_GROWTH = 10.0
+#: Retries per parameter before the design is declared infeasible; the largest relative back-off
+#: is BACKOFF_START * BACKOFF_GROWTH**(BACKOFF_STEPS - 1) = 1e-3 (a margin not resolved by then
+#: is not a rounding matter).
+BACKOFF_STEPS = 7
+#: The method by which a design's verdict is obtained: every condition evaluated in Arb ball
+#: arithmetic from the exact float inputs ("verified in rigorous arithmetic" is How.EXACT in
+#: drip_cert.provenance). A design's label is weakest(VERIFY_METHOD, inputs): see L1Design.label.
+VERIFY_METHOD = How.EXACT
 #: Largest radius tried before a condition is declared infeasible for every rho.
 _RHO_CAP = 1e60
 #: Smallest positive radius / sampling period tried.
@@ -210,7 +265,13 @@ class L1Constants:
 
     Three constants are accepted but appear in no formula of the paper: ``L_mu_perp_hat``,
     ``L_sigma_perp_hat``, ``L_p_perp_hat`` (and hat-L_f, which is not a field).
+
+    ``num`` (a class attribute, not a field) is the float64 backend of the appendix formulas
+    (:data:`drip_cert.bounds.l1drac_appendix.FLOAT`); the Arb view of
+    :class:`drip_cert.bounds.l1drac_verify.ArbConstants` carries the Arb one.
     """
+
+    num: ClassVar[FloatOps] = FLOAT
 
     lam: float
     Delta_f: float
@@ -342,13 +403,13 @@ class L1Constants:
 
     @property
     def k_r(self) -> float:
-        """Delta_g_perp Delta_mu_perp / lambda in (0, 1) (Assumption 7); the factor of (16a)."""
-        return self.Delta_g_perp * self.Delta_mu_perp / self.lam
+        """Delta_g_perp Delta_mu_perp / lambda in [0, 1) (Assumption 7); the factor of (16a)."""
+        return unmatched_gain_r(self)
 
     @property
     def k_a(self) -> float:
-        """Delta_g_perp L_mu_perp / lambda in (0, 1) (Assumption 7); the factor of (16b)."""
-        return self.Delta_g_perp * self.L_mu_perp / self.lam
+        """Delta_g_perp L_mu_perp / lambda in [0, 1) (Assumption 7); the factor of (16b)."""
+        return unmatched_gain_a(self)
 
 
 def _opt_positive(name: str, value: Any) -> float | None:
@@ -416,8 +477,16 @@ class DesignRequest:
 class ConditionResult:
     """One condition of L1-DRAC Sec. 3.2 in the paper's form ``lhs REL rhs``.
 
-    ``margin`` is signed, positive = satisfied: ``lhs - rhs`` for (16a, b) (``lhs >= rhs``),
-    ``rhs - lhs`` for (21a, b) (``lhs < rhs``, strict) and (24) (``lhs <= rhs``).
+    ``lhs``, ``rhs``, ``margin`` and ``holds`` are the float64 evaluation: ``margin`` is signed,
+    positive = satisfied: ``lhs - rhs`` for (16a, b) (``lhs >= rhs``), ``rhs - lhs`` for (21a, b)
+    (``lhs < rhs``, strict) and (24) (``lhs <= rhs``); ``holds`` is the float comparison.
+
+    ``verified``, ``margin_lo`` and ``margin_hi`` are the rigorous evaluation of the same margin
+    in Arb ball arithmetic (:func:`drip_cert.bounds.l1drac_verify.verify_conditions`):
+    ``[margin_lo, margin_hi]`` encloses the exact margin at the float inputs (lower end rounded
+    down, upper end rounded up), and ``verified`` is ``margin_lo > 0`` (the ball's lower end is
+    > 0). Only a verified condition counts for :attr:`L1Design.feasible`. Results of the
+    internal float-only searches carry ``verified=False`` and NaN ends.
     """
 
     eq: str
@@ -426,9 +495,13 @@ class ConditionResult:
     margin: float
     holds: bool
     relation: str = ""
+    verified: bool = False
+    margin_lo: float = math.nan
+    margin_hi: float = math.nan
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON-ready dictionary: eq, lhs, rhs, margin, holds, relation."""
+        """JSON-ready dictionary: eq, lhs, rhs, margin, holds, relation, verified, margin_lo,
+        margin_hi."""
         return {
             "eq": self.eq,
             "lhs": json_float(self.lhs),
@@ -436,22 +509,29 @@ class ConditionResult:
             "margin": json_float(self.margin),
             "holds": bool(self.holds),
             "relation": self.relation,
+            "verified": bool(self.verified),
+            "margin_lo": json_float(self.margin_lo),
+            "margin_hi": json_float(self.margin_hi),
         }
 
 
-def _result(eq: str, lhs: float, rhs: float, relation: str) -> ConditionResult:
+def _result(eq: str, lhs: float, rhs: float) -> ConditionResult:
+    relation = RELATIONS[eq]
+    margin = margin_of(eq, lhs, rhs)
     if relation == ">=":
-        margin = lhs - rhs
         holds = lhs >= rhs
     elif relation == "<":
-        margin = rhs - lhs
         holds = lhs < rhs
     else:  # "<="
-        margin = rhs - lhs
         holds = lhs <= rhs
     if math.isnan(margin):
         holds = False
     return ConditionResult(eq, lhs, rhs, margin, bool(holds), relation)
+
+
+def _with_arb(r: ConditionResult, v: ArbMargin) -> ConditionResult:
+    """``r`` with the Arb enclosure ``v`` of its margin."""
+    return dataclasses.replace(r, verified=v.verified, margin_lo=v.lo, margin_hi=v.hi)
 
 
 def _check_omega(c: L1Constants, omega: float) -> None:
@@ -481,39 +561,34 @@ def _check_p(c: L1Constants, p: Any) -> int:
 # --------------------------------------------------------------------------------------------
 
 
+# The float64 conditions (the searches' oracle): the two sides come from the generic
+# transcription of l1drac_appendix (the Arb verifier evaluates the same code).
+
+
 def _c16a(c: L1Constants, rc: RefConstants, omega: float, rho_r: float) -> ConditionResult:
-    lhs = (1.0 - c.k_r) * rho_r**2
-    rhs = c.alpha**2 + gamma_r(rho_r, omega, rc) + c.eps_r
-    return _result("16a", lhs, rhs, ">=")
+    return _result("16a", *sides_16a(c, rc, omega, rho_r))
 
 
 def _c16b(c: L1Constants, tc: TrueConstants, omega: float, rho_a: float) -> ConditionResult:
-    lhs = (1.0 - c.k_a) * rho_a**2
-    rhs = gamma_a(rho_a, omega, tc) + c.eps_a
-    return _result("16b", lhs, rhs, ">=")
+    return _result("16b", *sides_16b(c, tc, omega, rho_a))
 
 
 def _c21a(c: L1Constants, rc: RefConstants, omega: float, rho_r: float) -> ConditionResult:
     # Theta_r is divided by |2 lambda - omega| exactly once (the authors' Julia code: twice).
-    lhs = theta_r(rho_r, omega, rc) / abs(2.0 * c.lam - omega)
-    rhs = (1.0 - c.k_r) * rho_r**2 - c.alpha**2 - gamma_r(rho_r, omega, rc)
-    return _result("21a", lhs, rhs, "<")
+    return _result("21a", *sides_21a(c, rc, omega, rho_r))
 
 
 def _budget_a(
     c: L1Constants, tc: TrueConstants, omega: float, rho_r: float, rho_a: float
 ) -> tuple[float, float, float]:
     """((1 - k_a) rho_a^2 - Gamma_a, Theta_a / |2 lambda - omega|, Gamma_a)."""
-    ga = gamma_a(rho_a, omega, tc)
-    th = theta_a(rho_a, rho_r, omega, tc, c.Delta_star) / abs(2.0 * c.lam - omega)
-    return (1.0 - c.k_a) * rho_a**2 - ga, th, ga
+    return budget_a(c, tc, omega, rho_r, rho_a)
 
 
 def _c21b(
     c: L1Constants, tc: TrueConstants, omega: float, rho_r: float, rho_a: float
 ) -> ConditionResult:
-    rhs, lhs, _ = _budget_a(c, tc, omega, rho_r, rho_a)
-    return _result("21b", lhs, rhs, "<")
+    return _result("21b", *sides_21b(c, tc, omega, rho_r, rho_a))
 
 
 def _c24(
@@ -528,40 +603,78 @@ def _c24(
     *,
     envelope: bool = False,
 ) -> ConditionResult:
-    s = sampling_constants(c, p, omega, Ts, lambda_s, envelope=envelope)
-    lhs = upsilon_sum(rho_a + rho_r + c.Delta_star, rho_a, s)
-    b, th, _ = _budget_a(c, tc, omega, rho_r, rho_a)
-    return _result("24", lhs, b - th, "<=")
+    return _result("24", *sides_24(c, tc, p, omega, lambda_s, Ts, rho_r, rho_a, envelope=envelope))
+
+
+def _verified(
+    c: L1Constants,
+    p: int,
+    results: tuple[ConditionResult, ...],
+    omega: float,
+    *,
+    lambda_s: float | None = None,
+    Ts: float | None = None,
+    rho_r: float | None = None,
+    rho_a: float | None = None,
+) -> tuple[ConditionResult, ...]:
+    """``results`` with their Arb-verified margins (one Arb evaluation for all of them)."""
+    v = verify_conditions(
+        c,
+        p,
+        omega,
+        lambda_s=lambda_s,
+        Ts=Ts,
+        rho_r=rho_r,
+        rho_a=rho_a,
+        which=tuple(r.eq for r in results),
+    )
+    return tuple(_with_arb(r, v[r.eq]) for r in results)
 
 
 def condition_16a(c: L1Constants, p: int, omega: float, rho_r: float) -> ConditionResult:
-    """(16a): ``(1 - Dgp Dmup / lambda) rho_r^2 >= alpha^2 + Gamma_r(rho_r, p, omega) + eps_r``."""
+    """(16a): ``(1 - Dgp Dmup / lambda) rho_r^2 >= alpha^2 + Gamma_r(rho_r, p, omega) + eps_r``.
+
+    Float64 verdict plus the Arb-verified margin (:class:`ConditionResult`).
+    """
     p = _check_p(c, p)
     _check_omega(c, omega)
-    return _c16a(c, reference_constants(c, p), omega, rho_r)
+    r = _c16a(c, reference_constants(c, p), omega, rho_r)
+    return _verified(c, p, (r,), omega, rho_r=rho_r)[0]
 
 
 def condition_16b(c: L1Constants, p: int, omega: float, rho_a: float) -> ConditionResult:
-    """(16b): ``(1 - Dgp Lmup / lambda) rho_a^2 >= Gamma_a(rho_a, p, omega) + eps_a``."""
+    """(16b): ``(1 - Dgp Lmup / lambda) rho_a^2 >= Gamma_a(rho_a, p, omega) + eps_a``.
+
+    Float64 verdict plus the Arb-verified margin (:class:`ConditionResult`).
+    """
     p = _check_p(c, p)
     _check_omega(c, omega)
-    return _c16b(c, true_constants(c, p), omega, rho_a)
+    r = _c16b(c, true_constants(c, p), omega, rho_a)
+    return _verified(c, p, (r,), omega, rho_a=rho_a)[0]
 
 
 def condition_21a(c: L1Constants, p: int, omega: float, rho_r: float) -> ConditionResult:
-    """(21a): ``Theta_r / |2 lambda - omega| < (1 - k_r) rho_r^2 - alpha^2 - Gamma_r``."""
+    """(21a): ``Theta_r / |2 lambda - omega| < (1 - k_r) rho_r^2 - alpha^2 - Gamma_r``.
+
+    Float64 verdict plus the Arb-verified margin (:class:`ConditionResult`).
+    """
     p = _check_p(c, p)
     _check_omega(c, omega)
-    return _c21a(c, reference_constants(c, p), omega, rho_r)
+    r = _c21a(c, reference_constants(c, p), omega, rho_r)
+    return _verified(c, p, (r,), omega, rho_r=rho_r)[0]
 
 
 def condition_21b(
     c: L1Constants, p: int, omega: float, rho_r: float, rho_a: float
 ) -> ConditionResult:
-    """(21b): ``Theta_a / |2 lambda - omega| < (1 - Dgp Lmup / lambda) rho_a^2 - Gamma_a``."""
+    """(21b): ``Theta_a / |2 lambda - omega| < (1 - Dgp Lmup / lambda) rho_a^2 - Gamma_a``.
+
+    Float64 verdict plus the Arb-verified margin (:class:`ConditionResult`).
+    """
     p = _check_p(c, p)
     _check_omega(c, omega)
-    return _c21b(c, true_constants(c, p), omega, rho_r, rho_a)
+    r = _c21b(c, true_constants(c, p), omega, rho_r, rho_a)
+    return _verified(c, p, (r,), omega, rho_r=rho_r, rho_a=rho_a)[0]
 
 
 def condition_24(
@@ -576,11 +689,13 @@ def condition_24(
     """(24): ``sum_i Upsilon_{a_i}(rho', rho_a) <= (1 - k_a) rho_a^2 - Gamma_a - Theta_a/|2l - w|``.
 
     ``rho' = rho_a + rho_r + Delta_star``; the Upsilon maps are (25a-c) with (A.13)-(A.19).
+    Float64 verdict plus the Arb-verified margin (:class:`ConditionResult`).
     """
     p = _check_p(c, p)
     _check_omega(c, omega)
     _check_Ts(c, omega, lambda_s, Ts)
-    return _c24(c, true_constants(c, p), p, omega, lambda_s, Ts, rho_r, rho_a)
+    r = _c24(c, true_constants(c, p), p, omega, lambda_s, Ts, rho_r, rho_a)
+    return _verified(c, p, (r,), omega, lambda_s=lambda_s, Ts=Ts, rho_r=rho_r, rho_a=rho_a)[0]
 
 
 def _check_Ts(c: L1Constants, omega: float, lambda_s: float, Ts: float) -> None:
@@ -604,19 +719,23 @@ def evaluate_conditions(
     rho_r: float,
     rho_a: float,
 ) -> tuple[ConditionResult, ...]:
-    """(16a), (16b), (21a), (21b), (24) at one fully specified point, in that order."""
+    """(16a), (16b), (21a), (21b), (24) at one fully specified point, in that order.
+
+    Each result carries the float64 verdict and the Arb-verified margin (:class:`ConditionResult`).
+    """
     p = _check_p(c, p)
     _check_omega(c, omega)
     _check_Ts(c, omega, lambda_s, Ts)
     rc = reference_constants(c, p)
     tc = true_constants(c, p)
-    return (
+    floats = (
         _c16a(c, rc, omega, rho_r),
         _c16b(c, tc, omega, rho_a),
         _c21a(c, rc, omega, rho_r),
         _c21b(c, tc, omega, rho_r, rho_a),
         _c24(c, tc, p, omega, lambda_s, Ts, rho_r, rho_a),
     )
+    return _verified(c, p, floats, omega, lambda_s=lambda_s, Ts=Ts, rho_r=rho_r, rho_a=rho_a)
 
 
 # --------------------------------------------------------------------------------------------
@@ -806,9 +925,13 @@ def _largest_Ts(
     lambda_s: float,
     rho_r: float,
     rho_a: float,
+    budget: float | None = None,
 ) -> float | None:
-    b, th, _ = _budget_a(c, tc, omega, rho_r, rho_a)
-    budget = b - th
+    """:func:`largest_Ts` on precomputed constants; ``budget`` replaces the float64 right side
+    of (24) when given (the back-off passes its rigorous lower bound)."""
+    if budget is None:
+        b, th, _ = _budget_a(c, tc, omega, rho_r, rho_a)
+        budget = b - th
     if not budget > 0.0:
         return None
     xi1 = rho_a + rho_r + c.Delta_star
@@ -847,11 +970,15 @@ def _largest_Ts(
 class L1Design:
     """Result of :func:`design`: the control parameters, the radii and every condition's verdict.
 
-    ``feasible`` is True iff every condition in ``conditions`` holds (re-evaluated at the
-    returned point). ``kappa`` is ``rho * delta^{-1/(2p)}`` (the Markov step of Theorem 4.1,
-    valid for any delta in (0, 1) at this p; see :func:`kappa_markov`), None unless delta was
-    given. ``how`` says for each parameter whether it was "given" or "found". ``reason`` names
-    the failing condition and by how much when infeasible.
+    ``feasible`` is True iff all five conditions are in ``conditions`` and every one is
+    *verified*: re-evaluated at the returned point in Arb ball arithmetic, with a margin ball
+    whose lower end is > 0 (:class:`ConditionResult`). ``kappa`` is ``rho * delta^{-1/(2p)}``
+    (the Markov step of Theorem 4.1, valid for any delta in (0, 1) at this p; see
+    :func:`kappa_markov`), None unless delta was given. ``how`` says for each parameter whether
+    it was "given" or "found" (not a provenance label: see :meth:`label`). ``reason`` names the
+    failing or unverified condition and by how much when infeasible. ``backoff`` gives, for each
+    free parameter moved off its float root, the factor applied (rho_r and rho_a were
+    multiplied by it, Ts divided by it; see the module docstring).
     """
 
     feasible: bool
@@ -869,10 +996,31 @@ class L1Design:
     delta: float | None = None
     how: tuple[tuple[str, str], ...] = ()
     seconds: float = field(default=math.nan, compare=False)
+    backoff: tuple[tuple[str, float], ...] = ()
+
+    @property
+    def verified(self) -> bool:
+        """All five conditions present and Arb-verified (the same as :attr:`feasible`)."""
+        return len(self.conditions) == 5 and all(r.verified for r in self.conditions)
+
+    @property
+    def min_verified_margin(self) -> float:
+        """The smallest rigorous lower end of the margins (``-inf`` without conditions)."""
+        return min((r.margin_lo for r in self.conditions), default=-math.inf)
+
+    def label(self, inputs: Any = ()) -> How:
+        """The provenance of this design's verdict: ``weakest(VERIFY_METHOD, inputs)``.
+
+        ``inputs`` are the labels of the constants the design was computed from
+        (:class:`~drip_cert.provenance.Quantity`, :class:`~drip_cert.provenance.How` or their
+        strings); the constants object itself holds plain floats and carries none.
+        """
+        return weakest(VERIFY_METHOD, inputs)
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready dictionary (keys: feasible, p, omega, lambda_s, Ts, rho_r, rho_a, rho,
-        kappa, delta, conditions, reason, notes, how, tolerance, seconds)."""
+        kappa, delta, conditions, reason, notes, how, tolerance, seconds, verified, backoff,
+        verification)."""
 
         def f(x: float | None) -> float | str | None:
             return None if x is None else json_float(x)
@@ -894,10 +1042,20 @@ class L1Design:
             "how": dict(self.how),
             "tolerance": {
                 "root_rtol": ROOT_RTOL,
-                "note": "found radii are minimal and Ts maximal to this relative tolerance; "
-                "every condition was re-evaluated at the returned point",
+                "note": "before the back-off, found radii are minimal and Ts maximal to this "
+                "relative tolerance; every condition was re-evaluated at the returned point",
             },
             "seconds": json_float(self.seconds),
+            "verified": bool(self.verified),
+            "backoff": {k: json_float(v) for k, v in self.backoff},
+            "verification": {
+                "arithmetic": f"Arb ball arithmetic (python-flint), {ARB_PREC} bits",
+                "rule": "a condition is verified when the lower end of its margin ball is > 0",
+                "min_margin_lo": json_float(self.min_verified_margin),
+                "backoff_start": BACKOFF_START,
+                "backoff_growth": BACKOFF_GROWTH,
+                "backoff_steps": BACKOFF_STEPS,
+            },
         }
 
 
@@ -1129,6 +1287,21 @@ def design(c: L1Constants, req: DesignRequest) -> L1Design:
         pt, lambda_s = at_omega(omega)
 
     rho_r, rho_a, Ts = pt.rho_r, pt.rho_a, pt.Ts
+    backoff: tuple[tuple[str, float], ...] = ()
+    backoff_reason = ""
+    if rho_r is not None and rho_a is not None and Ts is not None and lambda_s is not None:
+        bo = _back_off(c, rc, tc, req, p, omega, lambda_s, rho_r, rho_a, Ts)
+        rho_r, rho_a, Ts = bo.rho_r, bo.rho_a, bo.Ts
+        backoff, backoff_reason = bo.factors, bo.reason
+        if backoff:
+            notes.append(
+                "moved off the float roots into the interior until every condition was verified "
+                "in Arb ball arithmetic: "
+                + ", ".join(
+                    f"{k} {'divided' if k == 'Ts' else 'multiplied'} by 1 + {f - 1.0:.0e}"
+                    for k, f in backoff
+                )
+            )
     rho = None if rho_r is None or rho_a is None else rho_r + rho_a
     conditions: tuple[ConditionResult, ...] = ()
     if rho_r is not None:
@@ -1140,22 +1313,46 @@ def design(c: L1Constants, req: DesignRequest) -> L1Design:
         env = _c24(c, tc, p, omega, lambda_s, Ts, rho_r, rho_a, envelope=True)
         if req.Ts is None:
             notes.append(
-                f"Ts is the largest value for which the monotone envelope of (24) holds "
-                f"(envelope lhs {env.lhs:.6g}, paper's lhs {conditions[-1].lhs:.6g})"
+                f"Ts is the largest value for which the monotone envelope of (24) holds, divided "
+                f"by the back-off factor (envelope lhs {env.lhs:.6g}, paper's lhs "
+                f"{conditions[-1].lhs:.6g})"
             )
     order = ("16a", "16b", "21a", "21b", "24")
     conditions = tuple(sorted(conditions, key=lambda r: order.index(r.eq)))
-    failing = [r for r in conditions if not r.holds]
+    if conditions:
+        conditions = _verified(
+            c, p, conditions, omega, lambda_s=lambda_s, Ts=Ts, rho_r=rho_r, rho_a=rho_a
+        )
+    failing = [r for r in conditions if not r.holds and not r.verified]
+    unverified = [r for r in conditions if r.holds and not r.verified]
     complete = len(conditions) == 5
-    feasible = complete and not failing
+    feasible = complete and not failing and not unverified
+    for r in conditions:
+        if r.verified and not r.holds:
+            notes.append(
+                f"({r.eq}): the float64 margin {r.margin:.6g} is not positive but the Arb "
+                f"enclosure of the margin, [{r.margin_lo:.6g}, {r.margin_hi:.6g}], is: the float "
+                "evaluation loses digits to cancellation; the verdict is the verified one"
+            )
     if feasible:
         reason = ""
-    elif failing:
+    elif failing or unverified:
         reason = "; ".join(
-            f"({r.eq}) fails by {-r.margin:.6g} (lhs {r.lhs:.6g} {r.relation} rhs {r.rhs:.6g} "
-            "is false)"
-            for r in failing
+            [
+                f"({r.eq}) fails by {-r.margin:.6g} (lhs {r.lhs:.6g} {r.relation} rhs "
+                f"{r.rhs:.6g} is false; Arb enclosure of the margin [{r.margin_lo:.6g}, "
+                f"{r.margin_hi:.6g}])"
+                for r in failing
+            ]
+            + [
+                f"({r.eq}) is not verified: its float64 margin {r.margin:.6g} is positive but the "
+                f"Arb enclosure of its margin is [{r.margin_lo:.6g}, {r.margin_hi:.6g}], whose "
+                "lower end is not > 0"
+                for r in unverified
+            ]
         )
+        if backoff_reason:
+            reason = backoff_reason + "; " + reason
     else:
         reason = pt.reason or "design incomplete"
     if feasible and rho_a is not None and req.Ts is None and req.rho_a is None:
@@ -1190,7 +1387,160 @@ def design(c: L1Constants, req: DesignRequest) -> L1Design:
         delta=req.delta,
         how=how,
         seconds=time.perf_counter() - t0,
+        backoff=backoff,
     )
+
+
+@dataclass(frozen=True)
+class _BackOff:
+    """The design point after :func:`_back_off` (the last one tried when ``reason`` is set)."""
+
+    rho_r: float
+    rho_a: float
+    Ts: float
+    factors: tuple[tuple[str, float], ...]
+    reason: str
+
+
+def _backoff_factors() -> tuple[float, ...]:
+    """1 + BACKOFF_START * BACKOFF_GROWTH^k, k = 0 .. BACKOFF_STEPS - 1."""
+    return tuple(1.0 + BACKOFF_START * BACKOFF_GROWTH**k for k in range(BACKOFF_STEPS))
+
+
+def _float_conditions(
+    c: L1Constants,
+    rc: RefConstants,
+    tc: TrueConstants,
+    p: int,
+    omega: float,
+    which: tuple[str, ...],
+    *,
+    rho_r: float | None = None,
+    rho_a: float | None = None,
+    lambda_s: float | None = None,
+    Ts: float | None = None,
+) -> tuple[ConditionResult, ...]:
+    """The float64 results of the conditions ``which`` at one point (the searches' oracle)."""
+    make = {
+        "16a": lambda: _c16a(c, rc, omega, rho_r),
+        "21a": lambda: _c21a(c, rc, omega, rho_r),
+        "16b": lambda: _c16b(c, tc, omega, rho_a),
+        "21b": lambda: _c21b(c, tc, omega, rho_r, rho_a),
+        "24": lambda: _c24(c, tc, p, omega, lambda_s, Ts, rho_r, rho_a),
+    }
+    return tuple(make[eq]() for eq in which)
+
+
+def _back_off(
+    c: L1Constants,
+    rc: RefConstants,
+    tc: TrueConstants,
+    req: DesignRequest,
+    p: int,
+    omega: float,
+    lambda_s: float,
+    rho_r: float,
+    rho_a: float,
+    Ts: float,
+) -> _BackOff:
+    """Move the free parameters of a complete float design off their roots, into the interior.
+
+    In the order rho_r, rho_a, Ts (the module docstring): for each free parameter, the relative
+    back-off ``f`` runs through :func:`_backoff_factors` until the conditions that parameter
+    closes are Arb-verified -- (16a), (21a) for rho_r; (16b), (21b) (and (24) when Ts is fixed)
+    for rho_a; (24) for Ts -- and hold in float64 as well. The second requirement keeps the
+    margin above the float64 rounding of the conditions, which is what any other float
+    transcription sees: near the smallest rho_a the right side of (24) is a small difference of
+    large terms, and a margin that Arb resolves can still be below that rounding. If no step
+    meets both, the first Arb-verified step is taken (the verdict is the verified one; the
+    design notes the float disagreement); if none is verified, the design is infeasible. rho_a is
+    re-solved at the moved rho_r and Ts at the moved radii (both feasible sets shrink as rho_r
+    grows). Given parameters are not touched.
+
+    The Ts search of this stage compares the envelope of (24) with the Arb lower bound of its
+    right side (:func:`~drip_cert.bounds.l1drac_verify.budget_24_lower`), not with its float64
+    value, which can be off in its leading digits for the reason above and would put the float
+    root of Ts far from the verified one.
+    """
+    factors: list[tuple[str, float]] = []
+
+    def search(
+        name: str, which: tuple[str, ...], point: Callable[[float], dict[str, float | None]]
+    ) -> tuple[float, dict[str, float | None], str]:
+        first_verified: tuple[float, dict[str, float | None]] | None = None
+        fac, pt = 1.0, point(1.0)
+        for fac in _backoff_factors():
+            pt = point(fac)
+            v = verify_conditions(c, p, omega, which=which, **pt)
+            if not all(m.verified for m in v.values()):
+                continue
+            fl = _float_conditions(c, rc, tc, p, omega, which, **pt)
+            if all(r.holds for r in fl):
+                return fac, pt, ""
+            if first_verified is None:
+                first_verified = (fac, pt)
+        if first_verified is not None:  # verified, but float64 rounding still hides the margin
+            return first_verified[0], first_verified[1], ""
+        v = verify_conditions(c, p, omega, which=which, **pt)
+        fl = _float_conditions(c, rc, tc, p, omega, which, **pt)
+        bad = [(r, v[r.eq]) for r in fl if not v[r.eq].verified]
+        return (
+            fac,
+            pt,
+            "; ".join(
+                f"({r.eq}) is not verified with a positive margin after backing {name} off its "
+                f"float root by a relative {fac - 1.0:.0e} (float64 margin {r.margin:.6g}, Arb "
+                f"enclosure [{m.lo:.6g}, {m.hi:.6g}])"
+                for r, m in bad
+            ),
+        )
+
+    def fail(reason: str) -> _BackOff:
+        return _BackOff(rho_r, rho_a, Ts, tuple(factors), reason)
+
+    if req.rho_r is None:
+        r0 = rho_r
+        fac, _, why = search("rho_r", ("16a", "21a"), lambda f: {"rho_r": r0 * f})
+        rho_r = r0 * fac
+        factors.append(("rho_r", fac))
+        if why:
+            return fail(why)
+        if req.rho_a is None:
+            a = _smallest_rho_a(c, tc, p, omega, rho_r, lambda_s, req.Ts, ("16b", "21b", "24"))
+            if a is None:
+                return fail(f"no rho_a satisfies (16b), (21b) at the moved rho_r = {rho_r:.17g}")
+            rho_a = a
+    if req.rho_a is None:
+        a0 = rho_a
+        which = ("16b", "21b") + (("24",) if req.Ts is not None else ())
+        fac, _, why = search(
+            "rho_a",
+            which,
+            lambda f: {"rho_r": rho_r, "rho_a": a0 * f, "lambda_s": lambda_s, "Ts": req.Ts},
+        )
+        rho_a = a0 * fac
+        factors.append(("rho_a", fac))
+        if why:
+            return fail(why)
+    if req.Ts is None:
+        budget = budget_24_lower(c, p, omega, rho_r, rho_a)
+        t = _largest_Ts(c, tc, p, omega, lambda_s, rho_r, rho_a, budget)
+        if t is None:
+            return fail(
+                f"(24) cannot hold for any Ts at rho_r = {rho_r:.17g}, rho_a = {rho_a:.17g}: "
+                f"the rigorous lower bound of its right side is {budget:.6g}"
+            )
+        t0 = t
+        fac, _, why = search(
+            "Ts",
+            ("24",),
+            lambda f: {"rho_r": rho_r, "rho_a": rho_a, "lambda_s": lambda_s, "Ts": t0 / f},
+        )
+        Ts = t0 / fac
+        factors.append(("Ts", fac))
+        if why:
+            return fail(why)
+    return _BackOff(rho_r, rho_a, Ts, tuple(factors), "")
 
 
 @dataclass(frozen=True)

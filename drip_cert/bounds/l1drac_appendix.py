@@ -34,18 +34,46 @@ Numerics: every ``e^x - 1`` of the paper is :func:`math.expm1`, every ``1 - e^{-
 ``-expm1(-x)``, and ``1 - (lambda_s/omega) (e^{omega Ts}-1)/(e^{lambda_s Ts}-1)`` in gamma'_2
 (A.13c) is computed without cancellation (:func:`_one_minus_ratio`), so all quantities keep full
 relative precision down to ``Ts = 1e-14`` and below.
+
+One transcription, two arithmetics
+----------------------------------
+Every formula below is written once, generic over a small numeric backend (:class:`FloatOps`:
+``const``, ``sqrt``, ``exp``, ``expm1``, ``max``, ``mid``, ``series_remainder``). The constants
+object carries its backend as the attribute ``num``: :class:`~drip_cert.bounds.l1drac.L1Constants`
+carries :data:`FLOAT` (float64, :mod:`math`; the designer's fast searches), and the Arb view of
+:mod:`drip_cert.bounds.l1drac_verify` carries its Arb backend, so the same code evaluates every
+constant, map and condition in ball arithmetic from the same float inputs (the rigorous re-check
+of a returned design). The result dataclasses carry the backend on to the maps that read them.
+Rules that keep the Arb evaluation rigorous: every elementary function goes through ``num``,
+every integer-derived constant through ``num.const``, and no two plain floats are combined before
+one of them is a backend number (the verifier converts every input first). A branch chosen on
+``num.mid`` (the ball's midpoint) only picks between two formulas that are both valid, and the
+truncated series of :func:`_phi2` adds its remainder bound (``num.series_remainder``).
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any, TypeAlias
 
 if TYPE_CHECKING:  # pragma: no cover
     from drip_cert.bounds.l1drac import L1Constants
 
 __all__ = [
+    "Real",
+    "FloatOps",
+    "FLOAT",
+    "RELATIONS",
+    "margin_of",
+    "unmatched_gain_r",
+    "unmatched_gain_a",
+    "sides_16a",
+    "sides_16b",
+    "sides_21a",
+    "sides_21b",
+    "sides_24",
+    "budget_a",
     "frak_p",
     "frak_p_prime",
     "frak_p_dprime",
@@ -74,23 +102,78 @@ __all__ = [
 
 
 # --------------------------------------------------------------------------------------------
+# Numeric backends
+# --------------------------------------------------------------------------------------------
+
+#: A real number of the active backend: ``float`` (:data:`FLOAT`) or ``flint.arb`` (the Arb
+#: backend of :mod:`drip_cert.bounds.l1drac_verify`).
+Real: TypeAlias = Any
+
+#: Below this |x| the series of (e^x - 1 - x)/x^2 is summed (its 9th term is < 1e-16 relative).
+_PHI2_SERIES_BELOW = 1e-2
+
+
+class FloatOps:
+    """The float64 backend: :mod:`math`'s functions; the designer's searches run on it.
+
+    The Arb backend (:class:`drip_cert.bounds.l1drac_verify.ArbOps`) has the same methods.
+    """
+
+    name = "float64"
+    #: Terms k = 0..8 of a series in x with |x| < 1e-2 reach float64 precision (x^9/11! < 1e-25).
+    series_terms = 9
+
+    @staticmethod
+    def const(x: float) -> float:
+        """A number of this backend equal to ``x`` (float, int)."""
+        return float(x)
+
+    sqrt = staticmethod(math.sqrt)
+    exp = staticmethod(math.exp)
+    expm1 = staticmethod(math.expm1)
+
+    @staticmethod
+    def max(a: float, b: float) -> float:
+        """max(a, b)."""
+        return max(a, b)
+
+    @staticmethod
+    def mid(x: float) -> float:
+        """The float used to choose between two valid formulas (the value itself here)."""
+        return x
+
+    @staticmethod
+    def series_remainder(total: float, x: float, n: int, denom: float) -> float:
+        """``total`` plus the remainder ``|x|^n / (denom (1 - |x|))`` of a truncated series.
+
+        In float64 the remainder is below an ulp of ``total`` where the series is used, so the
+        total is returned unchanged; the Arb backend adds it as a ball radius.
+        """
+        return total
+
+
+#: The float64 backend (the default of every constants object).
+FLOAT = FloatOps()
+
+
+# --------------------------------------------------------------------------------------------
 # (A.1) global constants
 # --------------------------------------------------------------------------------------------
 
 
-def frak_p(p: int) -> float:
+def frak_p(p: int, num: FloatOps = FLOAT) -> Real:
     """Fraktur p(p) = (p (p - 1) / 2)^{1/2}; implements (A.1a) of L1-DRAC (zero at p = 1)."""
-    return math.sqrt(p * (p - 1) / 2.0)
+    return num.sqrt(num.const(p * (p - 1)) / 2.0)
 
 
-def frak_p_prime(p: int) -> float:
+def frak_p_prime(p: int, num: FloatOps = FLOAT) -> Real:
     """Fraktur p'(p) = (p (2p - 1) / 2)^{1/2}; implements (A.1a) of L1-DRAC."""
-    return math.sqrt(p * (2 * p - 1) / 2.0)
+    return num.sqrt(num.const(p * (2 * p - 1)) / 2.0)
 
 
-def frak_p_dprime(p: int) -> float:
+def frak_p_dprime(p: int, num: FloatOps = FLOAT) -> Real:
     """Fraktur p''(p) = (p (4p - 1))^{1/2}; implements (A.1a) of L1-DRAC."""
-    return math.sqrt(p * (4 * p - 1))
+    return num.sqrt(num.const(p * (4 * p - 1)))
 
 
 def lip_indicator(c: L1Constants) -> float:
@@ -107,43 +190,45 @@ def lip_indicator(c: L1Constants) -> float:
 class RefConstants:
     """The reference-process constants Delta^r of (A.2)-(A.7) of L1-DRAC at one moment order p.
 
-    ``lam``, ``Delta_star`` and ``p`` are carried along because (18b) and (22) need them.
+    ``lam``, ``Delta_star`` and ``p`` are carried along because (18b) and (22) need them, and
+    ``num`` (the backend of the constants they were computed from) because every map does.
     """
 
     p: int
-    lam: float
-    Delta_star: float
-    hat_1: float
-    hat_2: float
-    hat_3: float
-    hat_4: float
-    circ_1: float
-    circ_2: float
-    circ_3: float
-    circ_4: float
-    ocirc_1: float
-    ocirc_2: float
-    ocirc_3: float
-    ocirc_4: float
-    odot_1: float
-    odot_2: float
-    odot_3: float
-    odot_4: float
-    odot_5: float
-    odot_6: float
-    odot_7: float
-    odot_8: float
-    otimes_1: float
-    otimes_2: float
-    otimes_3: float
-    otimes_4: float
-    otimes_5: float
-    oast_1: float
-    oast_2: float
-    oast_3: float
+    lam: Real
+    Delta_star: Real
+    hat_1: Real
+    hat_2: Real
+    hat_3: Real
+    hat_4: Real
+    circ_1: Real
+    circ_2: Real
+    circ_3: Real
+    circ_4: Real
+    ocirc_1: Real
+    ocirc_2: Real
+    ocirc_3: Real
+    ocirc_4: Real
+    odot_1: Real
+    odot_2: Real
+    odot_3: Real
+    odot_4: Real
+    odot_5: Real
+    odot_6: Real
+    odot_7: Real
+    odot_8: Real
+    otimes_1: Real
+    otimes_2: Real
+    otimes_3: Real
+    otimes_4: Real
+    otimes_5: Real
+    oast_1: Real
+    oast_2: Real
+    oast_3: Real
+    num: FloatOps = FLOAT
 
 
-def reference_hats(c: L1Constants, p: int) -> tuple[float, float, float, float]:
+def reference_hats(c: L1Constants, p: int) -> tuple[Real, Real, Real, Real]:
     """hat-Delta^r_{1..4}(p); implements (A.2a) and (A.2b) of L1-DRAC.
 
     Returns
@@ -151,9 +236,10 @@ def reference_hats(c: L1Constants, p: int) -> tuple[float, float, float, float]:
     tuple
         ``(hat_1(p), hat_2(p), hat_3, hat_4)``.
     """
-    sl = math.sqrt(c.lam)
+    num = c.num
+    sl = num.sqrt(c.lam)
     ind = lip_indicator(c)
-    fp = frak_p(p)
+    fp = frak_p(p, num)
     h1 = c.Delta_g * (
         (c.Delta_f * (2.0 + c.Delta_star) * (1.0 - ind) + c.Delta_mu) / sl
         + fp * (2.0 * c.Delta_p + c.Delta_sigma)
@@ -180,11 +266,12 @@ def reference_constants(c: L1Constants, p: int) -> RefConstants:
         hat-Delta^r (A.2), Delta^r_circ (A.3), Delta^r_ocirc (A.4), Delta^r_odot (A.5),
         Delta^r_otimes (A.6), Delta^r_oast (A.7).
     """
+    num = c.num
     lam = c.lam
-    sl = math.sqrt(lam)
-    sm = math.sqrt(c.m)
-    fp = frak_p(p)
-    fp1 = frak_p_prime(p)
+    sl = num.sqrt(lam)
+    sm = num.sqrt(num.const(c.m))
+    fp = frak_p(p, num)
+    fp1 = frak_p_prime(p, num)
     h1, h2, h3, h4 = reference_hats(c, p)
     dg = c.Delta_g
     dmp = c.Delta_mu_par
@@ -258,6 +345,7 @@ def reference_constants(c: L1Constants, p: int) -> RefConstants:
         oast_1=oast_1,
         oast_2=oast_2,
         oast_3=oast_3,
+        num=num,
     )
 
 
@@ -271,24 +359,25 @@ class TrueConstants:
     """The true-process constants of (A.8)-(A.12) of L1-DRAC at one moment order p."""
 
     p: int
-    lam: float
-    hat_1: float
-    hat_2: float
-    hat_3: float
-    hat_4: float
-    hat_5: float
-    ocirc_1: float
-    odot_1: float
-    odot_2: float
-    odot_3: float
-    odot_4: float
-    otimes_1: float
-    otimes_2: float
-    otimes_3: float
-    otimes_4: float
-    oast_1: float
-    oast_2: float
-    oast_3: float
+    lam: Real
+    hat_1: Real
+    hat_2: Real
+    hat_3: Real
+    hat_4: Real
+    hat_5: Real
+    ocirc_1: Real
+    odot_1: Real
+    odot_2: Real
+    odot_3: Real
+    odot_4: Real
+    otimes_1: Real
+    otimes_2: Real
+    otimes_3: Real
+    otimes_4: Real
+    oast_1: Real
+    oast_2: Real
+    oast_3: Real
+    num: FloatOps = FLOAT
 
 
 def true_constants(c: L1Constants, p: int) -> TrueConstants:
@@ -297,11 +386,12 @@ def true_constants(c: L1Constants, p: int) -> TrueConstants:
     The paper's (A.10b) prints hat-Delta_6 in Delta_{odot_4}; it is hat-Delta_5 (see the module
     docstring), and hat-Delta_5 is used.
     """
+    num = c.num
     lam = c.lam
-    sl = math.sqrt(lam)
+    sl = num.sqrt(lam)
     ind = lip_indicator(c)
-    fp = frak_p(p)
-    fp1 = frak_p_prime(p)
+    fp = frak_p(p, num)
+    fp1 = frak_p_prime(p, num)
     dg = c.Delta_g
     lmp = c.L_mu_par
     lpar = c.L_p_par + c.L_sigma_par  # (L_p^par + L_sigma^par)
@@ -310,7 +400,7 @@ def true_constants(c: L1Constants, p: int) -> TrueConstants:
     h2 = dg * fp * (c.L_p + c.L_sigma)
     h3 = dg * c.Delta_f * (1.0 - ind) / sl
     h4 = (dg * (c.L_mu + c.L_f * ind) + c.Delta_g_dot) / sl
-    h5 = math.sqrt(c.m) * dg * (c.L_p + c.L_sigma)
+    h5 = num.sqrt(num.const(c.m)) * dg * (c.L_p + c.L_sigma)
     # (A.9)
     ocirc_1 = fp1 * lpar * h1 / sl
     # (A.10a)
@@ -348,6 +438,7 @@ def true_constants(c: L1Constants, p: int) -> TrueConstants:
         oast_1=oast_1,
         oast_2=oast_2,
         oast_3=oast_3,
+        num=num,
     )
 
 
@@ -356,27 +447,39 @@ def true_constants(c: L1Constants, p: int) -> TrueConstants:
 # --------------------------------------------------------------------------------------------
 
 
-def _phi2(x: float) -> float:
-    """(e^x - 1 - x) / x^2 to full relative precision (series for small |x|)."""
-    if abs(x) < 1e-2:
-        # sum_{k>=0} x^k / (k+2)!; the x^8 term is below 1e-16 / 3.6e6 relative
-        term = 0.5
-        total = 0.5
-        for k in range(1, 9):
-            term *= x / (k + 2)
-            total += term
-        return total
-    return (math.expm1(x) - x) / (x * x)
+def _phi2(x: Real, num: FloatOps) -> Real:
+    """(e^x - 1 - x) / x^2 to full relative precision (series for small |x|).
+
+    For ``|x| < 1e-2`` the series ``sum_{k>=0} x^k / (k+2)!`` is summed to ``k = n - 1`` with
+    ``n = num.series_terms``; its remainder is at most ``|x|^n / ((n+2)! (1 - |x|))`` (a
+    geometric tail, ``(k+2)! >= (n+2)!`` for k >= n), which the Arb backend adds as a radius
+    (float64: n = 9, a remainder below 1e-16 / 3.6e6 relative).
+    """
+    if abs(num.mid(x)) < _PHI2_SERIES_BELOW:
+        n = num.series_terms
+        term = num.const(0.5)
+        total = term
+        for k in range(1, n):
+            term = term * (x / (k + 2))
+            total = total + term
+        return num.series_remainder(total, x, n, math.factorial(n + 2))
+    return (num.expm1(x) - x) / (x * x)
 
 
-def _one_minus_ratio(omega: float, lambda_s: float, Ts: float) -> float:
+def _one_minus_ratio(omega: Real, lambda_s: Real, Ts: Real, num: FloatOps) -> Real:
     """1 - (lambda_s/omega) (e^{omega Ts} - 1)/(e^{lambda_s Ts} - 1), without cancellation.
 
     With e(x) = x + x^2 phi2(x): omega e(lambda_s T) - lambda_s e(omega T)
     = omega lambda_s T^2 (lambda_s phi2(lambda_s T) - omega phi2(omega T)).
     """
     u = lambda_s * Ts
-    return lambda_s * Ts * Ts * (lambda_s * _phi2(u) - omega * _phi2(omega * Ts)) / math.expm1(u)
+    return (
+        lambda_s
+        * Ts
+        * Ts
+        * (lambda_s * _phi2(u, num) - omega * _phi2(omega * Ts, num))
+        / num.expm1(u)
+    )
 
 
 @dataclass(frozen=True)
@@ -390,39 +493,40 @@ class SamplingConstants:
 
     consts: L1Constants
     p: int
-    omega: float
-    Ts: float
-    lambda_s: float
+    omega: Real
+    Ts: Real
+    lambda_s: Real
     envelope: bool
-    gamma_1: float
-    gamma_1p: float
-    gamma_2: float
-    gamma_2p: float
-    gamma_pp: float
-    gamma_mu: float
-    gamma_mu_hat: float
-    gamma_sigma: float
-    gamma_sigma_hat: float
-    bar_1: float
-    bar_2: float
-    bar_3: float
-    mu_1: float
-    mu_2: float
-    mu_3: float
-    sigma_1: float
-    sigma_2: float
-    sigma_3: float
-    expm1_omega_Ts: float  # e^{omega Ts} - 1, used by (A.18c)
-    one_m_e2lam: float  # 1 - e^{-2 lambda Ts}, used by (A.19a)
-    one_m_e2omega: float  # 1 - e^{-2 omega Ts}, used by (A.13d), (A.19a)
+    gamma_1: Real
+    gamma_1p: Real
+    gamma_2: Real
+    gamma_2p: Real
+    gamma_pp: Real
+    gamma_mu: Real
+    gamma_mu_hat: Real
+    gamma_sigma: Real
+    gamma_sigma_hat: Real
+    bar_1: Real
+    bar_2: Real
+    bar_3: Real
+    mu_1: Real
+    mu_2: Real
+    mu_3: Real
+    sigma_1: Real
+    sigma_2: Real
+    sigma_3: Real
+    expm1_omega_Ts: Real  # e^{omega Ts} - 1, used by (A.18c)
+    one_m_e2lam: Real  # 1 - e^{-2 lambda Ts}, used by (A.19a)
+    one_m_e2omega: Real  # 1 - e^{-2 omega Ts}, used by (A.13d), (A.19a)
+    num: FloatOps = FLOAT  # the backend of ``consts``
 
 
 def sampling_constants(
     c: L1Constants,
     p: int,
-    omega: float,
-    Ts: float,
-    lambda_s: float,
+    omega: Real,
+    Ts: Real,
+    lambda_s: Real,
     *,
     envelope: bool = False,
 ) -> SamplingConstants:
@@ -448,33 +552,35 @@ def sampling_constants(
     -------
     SamplingConstants
     """
+    num = c.num
+    omega, Ts, lambda_s = num.const(omega), num.const(Ts), num.const(lambda_s)
     lam = c.lam
     u = lambda_s * Ts
-    em1_u = math.expm1(u)  # e^{lambda_s Ts} - 1
-    em1_w = math.expm1(omega * Ts)  # e^{omega Ts} - 1
-    fp1 = frak_p_prime(p)
-    fp2 = frak_p_dprime(p)
+    em1_u = num.expm1(u)  # e^{lambda_s Ts} - 1
+    em1_w = num.expm1(omega * Ts)  # e^{omega Ts} - 1
+    fp1 = frak_p_prime(p, num)
+    fp2 = frak_p_dprime(p, num)
     # (A.13a): gamma_1 = (lambda_s (e^u + 1)/(e^u - 1))^{1/2};  Ts*gamma_1 kept separately
-    gamma_1 = math.sqrt(lambda_s * (2.0 + em1_u) / em1_u)
-    Ts_gamma_1 = math.sqrt(Ts * (2.0 + em1_u) * (u / em1_u))  # = Ts gamma_1, no overflow
-    one_m_e2lam = -math.expm1(-2.0 * lam * Ts)
-    one_m_ew = -math.expm1(-omega * Ts)
+    gamma_1 = num.sqrt(lambda_s * (2.0 + em1_u) / em1_u)
+    Ts_gamma_1 = num.sqrt(Ts * (2.0 + em1_u) * (u / em1_u))  # = Ts gamma_1, no overflow
+    one_m_e2lam = -num.expm1(-2.0 * lam * Ts)
+    one_m_ew = -num.expm1(-omega * Ts)
     gamma_1p = one_m_e2lam * one_m_ew
     # (A.13b): gamma_2 = max(e^{(omega-lambda_s)Ts}, 1) * R,  R = (ls/w)(e^{w Ts}-1)/(e^{ls Ts}-1)
-    one_m_R = _one_minus_ratio(omega, lambda_s, Ts)
+    one_m_R = _one_minus_ratio(omega, lambda_s, Ts, num)
     R = 1.0 - one_m_R
-    e_diff = math.exp((omega - lambda_s) * Ts)
-    gamma_2 = max(e_diff, 1.0) * R
+    e_diff = num.exp((omega - lambda_s) * Ts)
+    gamma_2 = num.max(e_diff, 1.0) * R
     # (A.13c): |1 - e^{(w-ls)Ts} R| = |-(e^{(w-ls)Ts} - 1) + e^{(w-ls)Ts}(1 - R)|, both terms of
     # one sign, so no cancellation
-    gamma_2p = max(
-        abs(-math.expm1((omega - lambda_s) * Ts) + e_diff * one_m_R),
+    gamma_2p = num.max(
+        abs(-num.expm1((omega - lambda_s) * Ts) + e_diff * one_m_R),
         abs(one_m_R),
     )
-    g2 = max(gamma_2, 1.0) if envelope else gamma_2
-    one_m_e2omega = -math.expm1(-2.0 * omega * Ts)
+    g2 = num.max(gamma_2, 1.0) if envelope else gamma_2
+    one_m_e2omega = -num.expm1(-2.0 * omega * Ts)
     # (A.13d)
-    gamma_pp = fp1 * gamma_2p + fp2 * math.sqrt(one_m_e2omega) * (2.0 + g2)
+    gamma_pp = fp1 * gamma_2p + fp2 * num.sqrt(one_m_e2omega) * (2.0 + g2)
     # (A.14a)-(A.14c)
     gamma_mu = c.L_mu_par + c.L_mu * g2 * c.Delta_Theta
     gamma_mu_hat = c.L_mu_par_hat + c.L_mu_hat * g2 * c.Delta_Theta
@@ -483,10 +589,10 @@ def sampling_constants(
         c.L_p_par_hat + c.L_sigma_par_hat + g2 * c.Delta_Theta * (c.L_p_hat + c.L_sigma_hat)
     )
     # (A.15a)-(A.15c)
-    e_mu = 1.0 if envelope else math.exp(-u)  # e^{-lambda_s Ts}
+    e_mu = num.const(1.0) if envelope else num.exp(-u)  # e^{-lambda_s Ts}
     gt = c.Delta_g * c.Delta_Theta * e_mu
     ps = c.Delta_p + c.Delta_sigma
-    s2T = math.sqrt(2.0 * Ts)  # sqrt(2) sqrt(Ts)
+    s2T = num.sqrt(2.0 * Ts)  # sqrt(2) sqrt(Ts)
     bar_1 = (
         2.0 * (Ts * (c.Delta_f + (1.0 + gt) * c.Delta_mu) + fp1 * gt * Ts_gamma_1 * ps)
         + 2.0 * s2T * fp1 * ps
@@ -494,7 +600,7 @@ def sampling_constants(
     bar_2 = 2.0 * fp1 * c.Delta_sigma * (s2T + gt * Ts_gamma_1)
     bar_3 = 2.0 * Ts * (c.Delta_f + (1.0 + gt) * c.Delta_mu)
     # (A.16a)-(A.16c)
-    one_m_eu = -math.expm1(-u)  # 1 - e^{-lambda_s Ts}
+    one_m_eu = -num.expm1(-u)  # 1 - e^{-lambda_s Ts}
     mu_1 = Ts * gamma_mu_hat + bar_1 * gamma_mu + c.Delta_mu_par * one_m_eu
     mu_2 = bar_2 * gamma_mu
     mu_3 = Ts * gamma_mu * bar_3 + c.Delta_mu_par * one_m_eu
@@ -502,14 +608,14 @@ def sampling_constants(
     # Prop. D.11 has no such term, so (A.17a) is implemented as printed, without it.
     lpar = c.L_p_par + c.L_sigma_par
     lhat_par = c.L_p_par_hat + c.L_sigma_par_hat
-    sq_b1 = math.sqrt(bar_1)
+    sq_b1 = num.sqrt(bar_1)
     sigma_1 = (lpar * sq_b1 + Ts * lhat_par) * (1.0 + g2) + (
         gamma_sigma * sq_b1 + Ts * gamma_sigma_hat
     )
     # (A.17b)
     bracket = gamma_sigma + (1.0 + g2) * lpar
-    sigma_2 = math.sqrt(bar_2) * bracket
-    sigma_3 = math.sqrt(bar_3) * bracket
+    sigma_2 = num.sqrt(bar_2) * bracket
+    sigma_3 = num.sqrt(bar_3) * bracket
     return SamplingConstants(
         consts=c,
         p=p,
@@ -538,57 +644,65 @@ def sampling_constants(
         expm1_omega_Ts=em1_w,
         one_m_e2lam=one_m_e2lam,
         one_m_e2omega=one_m_e2omega,
+        num=num,
     )
 
 
-def upsilon1_prime(xi: float, s: SamplingConstants) -> float:
+def upsilon1_prime(xi: Real, s: SamplingConstants) -> Real:
     """Upsilon'_1(xi; p, omega, Ts); implements (A.18a) of L1-DRAC."""
-    sw = math.sqrt(s.omega)
-    fp1 = frak_p_prime(s.p)
+    num = s.num
+    xi = num.const(xi)
+    sw = num.sqrt(s.omega)
+    fp1 = frak_p_prime(s.p, num)
+    sq = num.sqrt(xi)
     return (
         s.mu_1
         + sw * fp1 * s.sigma_1
-        + sw * fp1 * s.sigma_2 * xi**0.25
-        + (s.mu_2 + sw * fp1 * s.sigma_3) * math.sqrt(xi)
+        + sw * fp1 * s.sigma_2 * num.sqrt(sq)
+        + (s.mu_2 + sw * fp1 * s.sigma_3) * sq
         + s.mu_3 * xi
     )
 
 
-def upsilon2_prime(xi: float, s: SamplingConstants) -> float:
+def upsilon2_prime(xi: Real, s: SamplingConstants) -> Real:
     """Upsilon'_2(xi; p, omega, Ts); implements (A.18b) of L1-DRAC."""
     c = s.consts
-    return s.gamma_pp * (c.Delta_p_par + c.Delta_sigma_par * (1.0 + math.sqrt(xi)))
+    return s.gamma_pp * (c.Delta_p_par + c.Delta_sigma_par * (1.0 + s.num.sqrt(s.num.const(xi))))
 
 
-def upsilon3_prime(xi: float, s: SamplingConstants) -> float:
+def upsilon3_prime(xi: Real, s: SamplingConstants) -> Real:
     """Upsilon'_3(xi) = Delta_mu^par (e^{omega Ts} - 1)(1 + xi); implements (A.18c) of L1-DRAC."""
-    return s.consts.Delta_mu_par * s.expm1_omega_Ts * (1.0 + xi)
+    return s.consts.Delta_mu_par * s.expm1_omega_Ts * (1.0 + s.num.const(xi))
 
 
-def upsilon_minus_tilde(xi: float, s: SamplingConstants) -> float:
+def upsilon_minus_tilde(xi: Real, s: SamplingConstants) -> Real:
     """tilde-Upsilon^-(xi; p, omega, Ts); implements (A.19a) of L1-DRAC."""
     c = s.consts
-    fp1 = frak_p_prime(s.p)
-    diff = c.Delta_p_par + c.Delta_sigma_par * (1.0 + math.sqrt(xi))
-    inner = math.sqrt(s.omega) * fp1 * math.sqrt(s.one_m_e2omega) * diff + c.Delta_mu_par * (
-        1.0 + xi
-    )
+    num = s.num
+    xi = num.const(xi)
+    fp1 = frak_p_prime(s.p, num)
+    diff = c.Delta_p_par + c.Delta_sigma_par * (1.0 + num.sqrt(xi))
+    inner = num.sqrt(s.omega) * fp1 * num.sqrt(s.one_m_e2omega) * diff + c.Delta_mu_par * (1.0 + xi)
     return s.one_m_e2lam * c.Delta_g * inner / c.lam
 
 
-def upsilon_minus(xi: float, s: SamplingConstants) -> float:
+def upsilon_minus(xi: Real, s: SamplingConstants) -> Real:
     """Upsilon^-(xi; p, omega, Ts); implements (A.19b) of L1-DRAC."""
     c = s.consts
-    fp1 = frak_p_prime(s.p)
-    diff = c.Delta_p_par + c.Delta_sigma_par * (1.0 + math.sqrt(xi))
-    return s.gamma_1p * (2.0 * fp1 * diff + c.Delta_mu_par * (1.0 + xi) / math.sqrt(s.omega))
+    num = s.num
+    xi = num.const(xi)
+    fp1 = frak_p_prime(s.p, num)
+    diff = c.Delta_p_par + c.Delta_sigma_par * (1.0 + num.sqrt(xi))
+    return s.gamma_1p * (2.0 * fp1 * diff + c.Delta_mu_par * (1.0 + xi) / num.sqrt(s.omega))
 
 
-def upsilon_ring(xi: float, c: L1Constants, p: int, omega: float) -> float:
+def upsilon_ring(xi: Real, c: L1Constants, p: int, omega: Real) -> Real:
     """ring-Upsilon(xi; p, omega); implements (A.19c) of L1-DRAC (independent of Ts)."""
-    fp1 = frak_p_prime(p)
+    num = c.num
+    xi, omega = num.const(xi), num.const(omega)
+    fp1 = frak_p_prime(p, num)
     return c.Delta_g**2 * (
-        fp1 * (c.L_p_par + c.L_sigma_par) * math.sqrt(xi) + c.L_mu_par * xi / math.sqrt(omega)
+        fp1 * (c.L_p_par + c.L_sigma_par) * num.sqrt(xi) + c.L_mu_par * xi / num.sqrt(omega)
     )
 
 
@@ -597,12 +711,12 @@ def upsilon_ring(xi: float, c: L1Constants, p: int, omega: float) -> float:
 # --------------------------------------------------------------------------------------------
 
 
-def _abs_gap(lam: float, omega: float) -> float:
+def _abs_gap(lam: Real, omega: Real) -> Real:
     """|2 lambda - omega| (the caller guarantees omega != 2 lambda)."""
     return abs(2.0 * lam - omega)
 
 
-def gamma_r(rho_r: float, omega: float, rc: RefConstants) -> float:
+def gamma_r(rho_r: Real, omega: Real, rc: RefConstants) -> Real:
     """Gamma_r(rho_r, p, omega); implements (18b) of L1-DRAC.
 
     Parameters
@@ -614,36 +728,43 @@ def gamma_r(rho_r: float, omega: float, rc: RefConstants) -> float:
     rc
         :func:`reference_constants` at the same p.
     """
+    num = rc.num
+    rho_r, omega = num.const(rho_r), num.const(omega)
     lam = rc.lam
     w = omega / _abs_gap(lam, omega)
-    sl = math.sqrt(lam)
+    sl = num.sqrt(lam)
     r = rho_r + rc.Delta_star
+    sr = num.sqrt(r)
     return (
         rc.circ_1 / (2 * lam)
         + w * rc.circ_4
-        + (rc.ocirc_1 / (2 * lam) + w * rc.ocirc_4) * math.sqrt(r)
+        + (rc.ocirc_1 / (2 * lam) + w * rc.ocirc_4) * sr
         + (rc.odot_1 / (2 * lam) + w * rc.odot_8) * r
         + (rc.odot_2 / (2 * lam) + rc.odot_3 / (2 * sl) + rc.oast_1 * rc.Delta_star / (2 * lam))
         * rho_r
-        + rc.otimes_1 / (2 * sl) * r**1.5
+        + rc.otimes_1 / (2 * sl) * (r * sr)
     )
 
 
-def gamma_a(rho_a: float, omega: float, tc: TrueConstants) -> float:
+def gamma_a(rho_a: Real, omega: Real, tc: TrueConstants) -> Real:
     """Gamma_a(rho_a, p, omega); implements (18c) of L1-DRAC."""
+    num = tc.num
+    rho_a, omega = num.const(rho_a), num.const(omega)
     lam = tc.lam
     return (
         tc.odot_1 / (2 * lam)
         + omega * tc.odot_4 / _abs_gap(lam, omega)
-        + tc.otimes_1 / (2 * math.sqrt(lam)) * math.sqrt(rho_a)
+        + tc.otimes_1 / (2 * num.sqrt(lam)) * num.sqrt(rho_a)
     ) * rho_a
 
 
-def theta_r(rho_r: float, omega: float, rc: RefConstants) -> float:
+def theta_r(rho_r: Real, omega: Real, rc: RefConstants) -> Real:
     """Theta_r(rho_r, p, omega); implements (22) of L1-DRAC (NOT divided by |2 lambda - omega|)."""
-    sw = math.sqrt(omega)
+    num = rc.num
+    rho_r, omega = num.const(rho_r), num.const(omega)
+    sw = num.sqrt(omega)
     r = rho_r + rc.Delta_star
-    sr = math.sqrt(r)
+    sr = num.sqrt(r)
     return (
         rc.circ_2
         + sw * rc.circ_3
@@ -655,37 +776,37 @@ def theta_r(rho_r: float, omega: float, rc: RefConstants) -> float:
     )
 
 
-def theta_a(
-    rho_a: float, rho_r: float, omega: float, tc: TrueConstants, Delta_star: float
-) -> float:
+def theta_a(rho_a: Real, rho_r: Real, omega: Real, tc: TrueConstants, Delta_star: Real) -> Real:
     """Theta_a(rho_a, rho_r, p, omega); implements (23) of L1-DRAC (NOT divided by |2lambda-omega|).
 
     ``rho'' = rho_a + 2 (rho_r + Delta_star)`` as defined below (23).
     """
-    sw = math.sqrt(omega)
+    num = tc.num
+    rho_a, rho_r, omega = num.const(rho_a), num.const(rho_r), num.const(omega)
+    sw = num.sqrt(omega)
     rpp = rho_a + 2.0 * (rho_r + Delta_star)
     return (
         sw * tc.ocirc_1 + sw * tc.otimes_3 * rpp + (tc.otimes_2 + sw * tc.otimes_4) * rho_a
-    ) * math.sqrt(rho_a) + (
-        tc.odot_2 + sw * tc.odot_3 + tc.oast_2 * rpp + tc.oast_3 * rho_a
-    ) * rho_a
+    ) * num.sqrt(rho_a) + (tc.odot_2 + sw * tc.odot_3 + tc.oast_2 * rpp + tc.oast_3 * rho_a) * rho_a
 
 
-def upsilon_a1(xi1: float, xi2: float, s: SamplingConstants) -> float:
+def upsilon_a1(xi1: Real, xi2: Real, s: SamplingConstants) -> Real:
     """Upsilon_{a_1}(xi1, xi2; p, omega, Ts); implements (25a) of L1-DRAC."""
     c = s.consts
     lam = c.lam
+    xi2 = s.num.const(xi2)
     ring = upsilon_ring(xi2, c, s.p, s.omega)
     return upsilon_minus_tilde(xi1, s) * xi2 + s.omega / (
         lam * _abs_gap(lam, s.omega)
     ) * ring * upsilon_minus(xi1, s)
 
 
-def upsilon_a2(xi1: float, xi2: float, s: SamplingConstants) -> float:
+def upsilon_a2(xi1: Real, xi2: Real, s: SamplingConstants) -> Real:
     """Upsilon_{a_2}(xi1, xi2; p, omega, Ts); implements (25b) of L1-DRAC."""
     c = s.consts
     lam = c.lam
-    sw = math.sqrt(s.omega)
+    xi2 = s.num.const(xi2)
+    sw = s.num.sqrt(s.omega)
     ring = upsilon_ring(xi2, c, s.p, s.omega)
     return (
         (c.Delta_g * xi2 + sw / _abs_gap(lam, s.omega) * ring)
@@ -694,20 +815,121 @@ def upsilon_a2(xi1: float, xi2: float, s: SamplingConstants) -> float:
     )
 
 
-def upsilon_a3(xi1: float, xi2: float, s: SamplingConstants) -> float:
+def upsilon_a3(xi1: Real, xi2: Real, s: SamplingConstants) -> Real:
     """Upsilon_{a_3}(xi1, xi2; p, omega, Ts); implements (25c) of L1-DRAC."""
     c = s.consts
     lam = c.lam
-    sw = math.sqrt(s.omega)
+    xi2 = s.num.const(xi2)
+    sw = s.num.sqrt(s.omega)
     ring = upsilon_ring(xi2, c, s.p, s.omega)
     return (
         (2.0 * c.Delta_g * xi2 + sw / lam * ring) * upsilon3_prime(xi1, s) / _abs_gap(lam, s.omega)
     )
 
 
-def upsilon_sum(xi1: float, xi2: float, s: SamplingConstants) -> float:
+def upsilon_sum(xi1: Real, xi2: Real, s: SamplingConstants) -> Real:
     """sum_{i=1}^3 Upsilon_{a_i}(xi1, xi2); the left side of (24) of L1-DRAC.
 
     (24) evaluates it at ``xi1 = rho'(p) = rho_a + rho_r + Delta_star`` and ``xi2 = rho_a``.
     """
     return upsilon_a1(xi1, xi2, s) + upsilon_a2(xi1, xi2, s) + upsilon_a3(xi1, xi2, s)
+
+
+# --------------------------------------------------------------------------------------------
+# Sec. 3.2: the two sides of the design conditions (16a), (16b), (21a), (21b), (24)
+# --------------------------------------------------------------------------------------------
+
+#: Each condition in the paper's form ``lhs REL rhs`` (Sec. 3.2).
+RELATIONS: dict[str, str] = {"16a": ">=", "16b": ">=", "21a": "<", "21b": "<", "24": "<="}
+
+
+def margin_of(eq: str, lhs: Real, rhs: Real) -> Real:
+    """The signed margin of condition ``eq``, positive when it holds with room.
+
+    ``lhs - rhs`` for (16a, b) (``lhs >= rhs``); ``rhs - lhs`` for (21a, b) (``lhs < rhs``)
+    and (24) (``lhs <= rhs``).
+    """
+    return lhs - rhs if RELATIONS[eq] == ">=" else rhs - lhs
+
+
+def unmatched_gain_r(c: L1Constants) -> Real:
+    """k_r = Delta_g_perp Delta_mu_perp / lambda, in [0, 1) by Assumption 7; the factor of (16a)."""
+    return c.Delta_g_perp * c.Delta_mu_perp / c.lam
+
+
+def unmatched_gain_a(c: L1Constants) -> Real:
+    """k_a = Delta_g_perp L_mu_perp / lambda, in [0, 1) by Assumption 7; the factor of (16b)."""
+    return c.Delta_g_perp * c.L_mu_perp / c.lam
+
+
+def sides_16a(c: L1Constants, rc: RefConstants, omega: Real, rho_r: Real) -> tuple[Real, Real]:
+    """(16a): ``lhs = (1 - k_r) rho_r^2``, ``rhs = alpha^2 + Gamma_r(rho_r, p, omega) + eps_r``."""
+    rho_r = c.num.const(rho_r)
+    lhs = (1.0 - unmatched_gain_r(c)) * rho_r**2
+    rhs = c.alpha**2 + gamma_r(rho_r, omega, rc) + c.eps_r
+    return lhs, rhs
+
+
+def sides_16b(c: L1Constants, tc: TrueConstants, omega: Real, rho_a: Real) -> tuple[Real, Real]:
+    """(16b): ``lhs = (1 - k_a) rho_a^2``, ``rhs = Gamma_a(rho_a, p, omega) + eps_a``."""
+    rho_a = c.num.const(rho_a)
+    lhs = (1.0 - unmatched_gain_a(c)) * rho_a**2
+    rhs = gamma_a(rho_a, omega, tc) + c.eps_a
+    return lhs, rhs
+
+
+def sides_21a(c: L1Constants, rc: RefConstants, omega: Real, rho_r: Real) -> tuple[Real, Real]:
+    """(21a): ``lhs = Theta_r / |2 lambda - omega|``,
+    ``rhs = (1 - k_r) rho_r^2 - alpha^2 - Gamma_r``.
+
+    Theta_r is divided by |2 lambda - omega| exactly once (the authors' Julia code: twice).
+    """
+    rho_r, omega = c.num.const(rho_r), c.num.const(omega)
+    lhs = theta_r(rho_r, omega, rc) / _abs_gap(c.lam, omega)
+    rhs = (1.0 - unmatched_gain_r(c)) * rho_r**2 - c.alpha**2 - gamma_r(rho_r, omega, rc)
+    return lhs, rhs
+
+
+def budget_a(
+    c: L1Constants, tc: TrueConstants, omega: Real, rho_r: Real, rho_a: Real
+) -> tuple[Real, Real, Real]:
+    """``((1 - k_a) rho_a^2 - Gamma_a, Theta_a / |2 lambda - omega|, Gamma_a)``; (21b) and (24)."""
+    num = c.num
+    omega, rho_r, rho_a = num.const(omega), num.const(rho_r), num.const(rho_a)
+    ga = gamma_a(rho_a, omega, tc)
+    th = theta_a(rho_a, rho_r, omega, tc, c.Delta_star) / _abs_gap(c.lam, omega)
+    return (1.0 - unmatched_gain_a(c)) * rho_a**2 - ga, th, ga
+
+
+def sides_21b(
+    c: L1Constants, tc: TrueConstants, omega: Real, rho_r: Real, rho_a: Real
+) -> tuple[Real, Real]:
+    """(21b): ``lhs = Theta_a / |2 lambda - omega|``, ``rhs = (1 - k_a) rho_a^2 - Gamma_a``."""
+    rhs, lhs, _ = budget_a(c, tc, omega, rho_r, rho_a)
+    return lhs, rhs
+
+
+def sides_24(
+    c: L1Constants,
+    tc: TrueConstants,
+    p: int,
+    omega: Real,
+    lambda_s: Real,
+    Ts: Real,
+    rho_r: Real,
+    rho_a: Real,
+    *,
+    envelope: bool = False,
+) -> tuple[Real, Real]:
+    """(24): ``lhs = sum_i Upsilon_{a_i}(rho', rho_a)`` (25a-c), ``rhs = (1 - k_a) rho_a^2 -
+    Gamma_a - Theta_a / |2 lambda - omega|`` with ``rho' = rho_a + rho_r + Delta_star``.
+
+    ``envelope=True`` evaluates the left side on the monotone envelope of
+    :func:`sampling_constants` (the designer's Ts search).
+    """
+    num = c.num
+    rho_r, rho_a = num.const(rho_r), num.const(rho_a)
+    s = sampling_constants(c, p, omega, Ts, lambda_s, envelope=envelope)
+    lhs = upsilon_sum(rho_a + rho_r + c.Delta_star, rho_a, s)
+    b, th, _ = budget_a(c, tc, omega, rho_r, rho_a)
+    return lhs, b - th

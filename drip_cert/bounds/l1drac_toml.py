@@ -194,7 +194,9 @@ def design_l1_report(path: str | Path) -> dict[str, Any]:
     """Load ``path``, design, and return the JSON-ready report the CLI prints.
 
     Keys: those of :meth:`L1Design.to_dict` (``feasible`` decides the exit status: 0 if true,
-    1 if false) plus ``file``, ``constants`` and ``request``. Bad input raises SpecError (exit 2).
+    1 if false; it is true only when every condition is verified in Arb ball arithmetic, see
+    ``verified``, ``backoff`` and each condition's ``margin_lo`` / ``margin_hi``) plus ``file``,
+    ``constants`` and ``request``. Bad input raises SpecError (exit 2).
     """
     consts, req = load_l1_constants(path)
     d = design_from_request(consts, req)
