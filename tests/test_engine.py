@@ -38,6 +38,9 @@ disturbance act unopposed for about T_s + 1/omega = 0.012 s against a plant time
 THETA_ATOL = 1e-13
 """Two O(1)-conditioned 4x4 solves agree to a few ulps."""
 
+NORM_RTOL = 1e-14
+"""numpy's norm and the engine's left-to-right sum of squares differ by a few ulps."""
+
 EULER_RTOL = 2.5e-3
 """Global error of explicit Euler on a stable linear ODE over [0, T], relative: about
 dt * T / 2 = 2.5e-3 for dt = 1e-3, T = 5 and unit-size eigenvalues."""
@@ -175,7 +178,7 @@ _CFG = SimConfig(
 def _arrays(res):
     out = [res.sample_paths, res.sample_status]
     for g in res.gaps:
-        out += [g.mean, g.ci_low, g.ci_high, g.moments, g.tail_freq, g.sample_max]
+        out += [g.mean, g.ci_low, g.ci_high, g.moments, g.tail_freq, g.sample_max, g.path_max]
     out.append(np.array([(w.w2, w.baseline_a, w.baseline_b) for w in res.w2]))
     return out
 
@@ -257,6 +260,18 @@ def test_result_contents_and_save(base_result, tmp_path):
     assert summary["n_paths_done"] == 90
     with np.load(out / "arrays.npz") as data:
         np.testing.assert_array_equal(data["total_l1.mean"], res.gap("total_l1").mean)
+        np.testing.assert_array_equal(data["policy.path_max"], res.gap("policy").path_max)
+    # per-path maxima over the recorded times: one per valid path, and their max is the sample max
+    for g in res.gaps:
+        assert g.path_max.shape == (g.n,)
+        assert g.path_max.max() == g.sample_max.max()
+    # the kept sample paths give the first paths' policy-gap maxima directly
+    lead = res.sample_paths[1] - res.sample_paths[0]  # learned_nominal - expert_nominal
+    np.testing.assert_allclose(
+        res.gap("policy").path_max[: lead.shape[0]],
+        np.linalg.norm(lead, axis=-1).max(axis=1),
+        rtol=NORM_RTOL,
+    )
     assert not list(out.glob("*.tmp"))
 
 

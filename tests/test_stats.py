@@ -11,11 +11,15 @@ import scipy.stats
 from drip_cert.errors import SpecError
 from drip_cert.sim.stats import (
     accumulate,
+    bonferroni_level,
+    clopper_pearson_lower,
     clopper_pearson_upper,
     finalize,
     new_sums,
     norms_sequential,
     t_interval,
+    t_one_sided,
+    upper_quantile_bounds,
     w2_empirical,
 )
 
@@ -54,12 +58,14 @@ def test_chunked_accumulation_is_split_invariant_and_correct():
         assert np.array_equal(s.power_sums, whole.power_sums)
         assert np.array_equal(s.tail_counts, whole.tail_counts)
         assert np.array_equal(s.max, whole.max)
+        assert np.array_equal(s.path_max, whole.path_max)
         assert s.count == whole.count == len(r) - 3
     rv = r[valid]
     for q_i, q in enumerate(whole.powers):
         np.testing.assert_allclose(whole.power_sums[q_i], np.sum(rv**q, axis=0), rtol=SUM_RTOL)
     np.testing.assert_array_equal(whole.tail_counts[1], np.sum(rv >= 1.5, axis=0))
     np.testing.assert_array_equal(whole.max, rv.max(axis=0))
+    np.testing.assert_array_equal(whole.path_max, rv.max(axis=1))
 
 
 def test_finalize_matches_direct_computation():
@@ -110,6 +116,66 @@ def test_clopper_pearson_upper():
     assert np.all(up > ks / n)
     # defining equation: P(Bin(n, upper) <= k) = 1 - level
     np.testing.assert_allclose(scipy.stats.binom.cdf(ks, n, up), 1 - level, atol=CP_ATOL)
+
+
+def test_clopper_pearson_lower():
+    n, level = 50, 0.95
+    assert clopper_pearson_lower(0, n, level) == 0.0
+    assert clopper_pearson_lower(n, n, level) == pytest.approx((1 - level) ** (1 / n))
+    ks = np.arange(1, n + 1)
+    low = clopper_pearson_lower(ks, n, level)
+    assert np.all(np.diff(low) > 0)
+    assert np.all(low < ks / n)
+    # defining equation: P(Bin(n, lower) >= k) = 1 - level, i.e. beta quantile (1-level; k, n-k+1)
+    np.testing.assert_allclose(scipy.stats.binom.sf(ks - 1, n, low), 1 - level, atol=CP_ATOL)
+    np.testing.assert_allclose(low, scipy.stats.beta.ppf(1 - level, ks, n - ks + 1), atol=CP_ATOL)
+
+
+def test_t_one_sided_and_bonferroni():
+    rng = np.random.default_rng(6)
+    x = rng.normal(size=40)
+    mean, lo, hi = t_one_sided(x.sum(), (x * x).sum(), len(x), 0.9)
+    half = scipy.stats.t.ppf(0.9, len(x) - 1) * scipy.stats.sem(x)
+    assert float(lo) == pytest.approx(x.mean() - half, rel=SUM_RTOL)
+    assert float(hi) == pytest.approx(x.mean() + half, rel=SUM_RTOL)
+    assert float(mean) == pytest.approx(x.mean(), rel=SUM_RTOL)
+    with pytest.raises(SpecError, match="ci_level"):
+        t_one_sided(x.sum(), (x * x).sum(), len(x), 0.5)
+    assert bonferroni_level(0.95, 10) == pytest.approx(0.995, abs=1e-15)
+    assert bonferroni_level(0.95, 1) == 0.95
+
+
+def test_upper_quantile_bounds_match_the_frequency_test_and_cover():
+    rng = np.random.default_rng(7)
+    delta, level, n = 0.1, 0.95, 300
+    x = rng.exponential(size=n)
+    q_hat, q_low, q_high = upper_quantile_bounds(x, delta, level)
+    assert q_low <= q_hat <= q_high
+    assert q_hat == np.quantile(x, 1 - delta, method="inverted_cdf")
+    # q_low > rho  <=>  Clopper-Pearson lower bound of #{x > rho} / n exceeds delta
+    for rho in np.concatenate([np.sort(x), np.linspace(0.0, 5.0, 51)]):
+        k = int(np.sum(x > rho))
+        assert (q_low > rho) == bool(clopper_pearson_lower(k, n, level) > delta)
+    # coverage of the true quantile of Exp(1), log(1/delta), by each one-sided bound
+    reps, true_q = 2000, math.log(1 / delta)
+    lows, highs = [], []
+    for _ in range(reps):
+        _, lo, hi = upper_quantile_bounds(rng.exponential(size=60), delta, level)
+        lows.append(lo)
+        highs.append(hi)
+    se = math.sqrt(level * (1 - level) / reps)
+    assert np.mean(np.array(lows) <= true_q) >= level - COVERAGE_Z * se
+    assert np.mean(np.array(highs) >= true_q) >= level - COVERAGE_Z * se
+    # unknown draws (NaN, or missing up to n_total) weaken both bounds, never strengthen them
+    _, lo2, hi2 = upper_quantile_bounds(np.concatenate([x, [np.nan] * 20]), delta, level)
+    _, lo3, hi3 = upper_quantile_bounds(x, delta, level, n_total=n + 20)
+    assert (lo2, hi2) == (lo3, hi3)
+    assert lo2 <= q_low and hi2 >= q_high
+    # too few draws for a bound at this level: it is infinite, not made up. One draw bounds
+    # nothing; five bound the quantile from below (3 of 5 above rho already contradict delta =
+    # 0.1) but not from above (P(no draw above q) can be 0.9^5 = 0.59 > 0.05)
+    assert upper_quantile_bounds(np.ones(1), delta, level) == (1.0, -math.inf, math.inf)
+    assert upper_quantile_bounds(np.ones(5), delta, level) == (1.0, 1.0, math.inf)
 
 
 def test_w2_translation_and_one_dimension():

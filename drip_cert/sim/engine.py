@@ -394,6 +394,7 @@ class SimResult:
                 "tail_freq",
                 "tail_upper",
                 "sample_max",
+                "path_max",
             ):
                 arrays[f"{g.name}.{fld}"] = getattr(g, fld)
         _atomic_savez(directory / "arrays.npz", arrays)
@@ -676,6 +677,7 @@ def _state_arrays(state: _RunState) -> dict[str, np.ndarray]:
         out[f"sums{i}.power_sums"] = gs.power_sums
         out[f"sums{i}.tail_counts"] = gs.tail_counts
         out[f"sums{i}.max"] = gs.max
+        out[f"sums{i}.path_max"] = gs.path_max
     return out
 
 
@@ -689,6 +691,7 @@ def _state_from_arrays(a: dict[str, np.ndarray], template: _RunState) -> _RunSta
                 power_sums=a[f"sums{i}.power_sums"],
                 tail_counts=a[f"sums{i}.tail_counts"],
                 max=a[f"sums{i}.max"],
+                path_max=a[f"sums{i}.path_max"],
             )
         )
     return _RunState(
@@ -733,7 +736,7 @@ def _settings_hash(model, cfg, x0_sampler, x0_bar_sampler) -> str:
         "sizes": [model.n, model.m, model.d],
         "fingerprint": _fingerprint(model, x0_sampler, x0_bar_sampler),
         "has_x0_bar": x0_bar_sampler is not None,
-        "format": 1,
+        "format": 2,  # 2: per-path maxima in the state file
     }
     return hashlib.sha256(json.dumps(payload, sort_keys=True).encode()).hexdigest()
 

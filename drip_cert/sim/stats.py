@@ -4,7 +4,8 @@ The DRIP paper decomposes the total imitation gap (TIG, Definition "ImitationGap
 policy-induced gap ``E||x'_t - x*_t||`` and the uncertainty-induced gap ``E||X_t - x'_t||``
 (eq. Decomposition:IG:Components). For each gap and each recorded time this module accumulates,
 over paths, the power sums ``sum r^q`` (``q = 1, 2, 4, ..., 2 p_max``), the tail counts
-``#{r >= kappa}`` and the sample maximum, and turns them into
+``#{r >= kappa}``, the sample maximum and, per path, the maximum over the recorded times
+``max_t r_t`` (what a high-probability radius such as ``rho_TaSIL`` bounds), and turns them into
 
 * the mean with a CLT Student-t interval at a named level (two-sided);
 * the moments ``E r^{2p}`` and the ``L_{2p}`` norms ``E[r^{2p}]^{1/(2p)}`` that L1-DRAC
@@ -14,6 +15,12 @@ over paths, the power sums ``sum r^q`` (``q = 1, 2, 4, ..., 2 p_max``), the tail
   support of the gap there is none (Hoeffding/Bernstein need one; the divergence cap is far too
   loose to be useful);
 * the maximum over time of the mean gap with the interval at the argmax.
+
+For the validation (:mod:`drip_cert.validate`) it also offers one-sided bounds: Student-t bounds
+for a mean (:func:`t_one_sided`), Clopper-Pearson bounds for a proportion
+(:func:`clopper_pearson_upper`, :func:`clopper_pearson_lower`), distribution-free order-statistic
+bounds for an upper quantile (:func:`upper_quantile_bounds`) and the Bonferroni level for a
+family of tests (:func:`bonferroni_level`).
 
 Determinism: sums are added path by path in global path order (:func:`accumulate`), so the
 result does not depend on how paths were grouped into chunks, bit for bit.
@@ -25,6 +32,7 @@ is biased upward in dimension >= 3 (math notes: a true 0.2 measured 0.5 at 4000 
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -37,11 +45,15 @@ __all__ = [
     "GapStats",
     "W2Estimate",
     "accumulate",
+    "bonferroni_level",
+    "clopper_pearson_lower",
     "clopper_pearson_upper",
     "finalize",
     "new_sums",
     "norms_sequential",
     "t_interval",
+    "t_one_sided",
+    "upper_quantile_bounds",
     "w2_empirical",
 ]
 
@@ -64,6 +76,9 @@ class GapSums:
         ``(len(kappas), n_times)`` int64: ``#{paths: r_t >= kappa}``.
     max
         ``(n_times,)``: sample maximum of ``r_t`` (``-inf`` when empty).
+    path_max
+        ``(count,)``: ``max_t r_t`` of every valid path over the recorded times, in global path
+        order (8 bytes per path).
     """
 
     count: int
@@ -72,6 +87,7 @@ class GapSums:
     kappas: tuple[float, ...]
     tail_counts: np.ndarray
     max: np.ndarray
+    path_max: np.ndarray
 
 
 def new_sums(n_times: int, p_max: int, kappas: tuple[float, ...] = ()) -> GapSums:
@@ -89,6 +105,7 @@ def new_sums(n_times: int, p_max: int, kappas: tuple[float, ...] = ()) -> GapSum
         kappas=kappas,
         tail_counts=np.zeros((len(kappas), n_times), dtype=np.int64),
         max=np.full(n_times, -np.inf),
+        path_max=np.zeros(0),
     )
 
 
@@ -121,6 +138,8 @@ def accumulate(sums: GapSums, r: np.ndarray, valid: np.ndarray) -> GapSums:
     -----
     The power sums are updated one path at a time (a sequential left fold), so the result for
     a set of paths is the same floating-point number however the paths were split into chunks.
+    The per-path maxima are appended in path order (a maximum is exact), so they do not depend
+    on the split either.
     """
     r = np.asarray(r, dtype=np.float64)
     valid = np.asarray(valid, dtype=bool)
@@ -137,6 +156,7 @@ def accumulate(sums: GapSums, r: np.ndarray, valid: np.ndarray) -> GapSums:
     for i, kappa in enumerate(sums.kappas):
         tails[i] += np.count_nonzero(rv >= kappa, axis=0)
     mx = np.maximum(sums.max, rv.max(axis=0)) if rv.shape[0] else sums.max.copy()
+    pm = np.concatenate([sums.path_max, rv.max(axis=1, initial=-np.inf)])
     return GapSums(
         count=sums.count + int(rv.shape[0]),
         powers=sums.powers,
@@ -144,6 +164,7 @@ def accumulate(sums: GapSums, r: np.ndarray, valid: np.ndarray) -> GapSums:
         kappas=sums.kappas,
         tail_counts=tails,
         max=mx,
+        path_max=pm,
     )
 
 
@@ -177,6 +198,47 @@ def t_interval(s1, s2, n: int, level: float):
     return mean, mean - half, mean + half
 
 
+def t_one_sided(s1, s2, n: int, level: float):
+    """One-sided Student-t confidence bounds for a mean from power sums.
+
+    Parameters
+    ----------
+    s1, s2
+        ``sum x`` and ``sum x^2`` (arrays of equal shape).
+    n
+        Number of samples (>= 2 for finite bounds).
+    level
+        Confidence level of EACH bound, in (0.5, 1).
+
+    Returns
+    -------
+    mean, lower, upper : np.ndarray
+        ``mean -+ t_{level, n-1} s / sqrt(n)``: ``P(mu >= lower) ~ level`` and
+        ``P(mu <= upper) ~ level`` (CLT; not distribution-free). For right-skewed data the t
+        statistic is left-skewed, so the LOWER bound errs on the conservative side and the
+        upper bound on the liberal side.
+
+    Notes
+    -----
+    The two-sided interval of :func:`t_interval` at level ``2 level - 1`` has exactly these
+    end points; this function is that identity, so there is one t quantile in the module.
+    """
+    if not 0.5 < float(level) < 1.0:
+        raise SpecError(f"one-sided level must be in (0.5, 1), got {level!r}", field="ci_level")
+    return t_interval(s1, s2, n, 2.0 * float(level) - 1.0)
+
+
+def bonferroni_level(level: float, m: int) -> float:
+    """Per-test level of ``m`` one-sided tests whose union holds at ``level``: ``1 - (1-level)/m``.
+
+    By the union bound the probability that ANY of the ``m`` bounds fails is at most
+    ``m (1 - level) / m = 1 - level``, whatever the dependence between the tests.
+    """
+    if not 0.0 < float(level) < 1.0:
+        raise SpecError(f"confidence level must be in (0, 1), got {level!r}", field="ci_level")
+    return 1.0 - (1.0 - float(level)) / max(1, int(m))
+
+
 def clopper_pearson_upper(k, n: int, level: float):
     """One-sided Clopper-Pearson upper confidence bound on a binomial proportion.
 
@@ -190,6 +252,102 @@ def clopper_pearson_upper(k, n: int, level: float):
     with np.errstate(invalid="ignore"):
         up = scipy.stats.beta.ppf(level, k + 1.0, np.maximum(n - k, 1e-300))
     return np.where(k >= n, 1.0, up)
+
+
+def clopper_pearson_lower(k, n: int, level: float):
+    """One-sided Clopper-Pearson lower confidence bound on a binomial proportion.
+
+    ``P(p >= lower) >= level`` for ``k`` successes in ``n`` trials (exact, distribution-free):
+    ``lower = Beta^{-1}(1 - level; k, n - k + 1)``, and 0 when ``k = 0``.
+
+    Computed as ``1 - clopper_pearson_upper(n - k, n, level)`` (the failures' upper bound), which
+    is the same number by the symmetry ``Beta(a, b) = 1 - Beta(b, a)``: one implementation of the
+    beta quantile serves both sides.
+    """
+    k = np.asarray(k, dtype=np.float64)
+    if n < 1:
+        return np.zeros(k.shape)
+    low = 1.0 - np.asarray(clopper_pearson_upper(n - k, n, level), dtype=np.float64)
+    return np.where(k <= 0, 0.0, np.clip(low, 0.0, 1.0))
+
+
+def _first_true(pred, lo: int, hi: int) -> int | None:
+    """Smallest ``k`` in ``[lo, hi]`` with ``pred(k)``, ``pred`` monotone (False.., True..)."""
+    if lo > hi or not pred(hi):
+        return None
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if pred(mid):
+            hi = mid
+        else:
+            lo = mid + 1
+    return lo
+
+
+def upper_quantile_bounds(x, delta: float, level: float, n_total: int | None = None):
+    """Empirical ``(1 - delta)``-quantile of a sample and distribution-free confidence bounds.
+
+    The population quantile is ``q = inf{y : P(X > y) <= delta}``: a radius ``rho`` with
+    ``P(X > rho) <= delta`` is exactly a number ``>= q``.
+
+    Parameters
+    ----------
+    x
+        1-D sample (finite values or ``+inf``; NaN entries count as unknown, like the missing
+        ones below).
+    delta
+        Tail probability in (0, 1).
+    level
+        Confidence level of each one-sided bound.
+    n_total
+        Size of the whole i.i.d. sample when some draws are missing from ``x`` (e.g. diverged
+        paths; default ``len(x)``): the missing and the NaN draws are taken as ``-inf`` for the
+        lower bound and ``+inf`` for the upper one, so both stay valid whatever they were.
+
+    Returns
+    -------
+    q_hat, q_low, q_high : float
+        ``q_hat``: the ``ceil(n (1 - delta))``-th smallest known value (numpy's
+        ``inverted_cdf``); ``q_low``: the ``k``-th largest value, ``k`` the smallest count with
+        ``clopper_pearson_lower(k, n) > delta`` (``-inf`` when no such ``k``), so
+        ``P(q >= q_low) >= level``; ``q_high``: the ``k'``-th largest value, ``k'`` the largest
+        count with ``clopper_pearson_upper(k' - 1, n) <= delta`` (``+inf`` when none), so
+        ``P(q <= q_high) >= level``.
+
+    Notes
+    -----
+    ``q_low > rho`` holds exactly when ``#{x_i > rho} >= k``, i.e. when the Clopper-Pearson lower
+    bound of the exceedance frequency of ``rho`` is ``> delta``: the quantile bound and the
+    frequency test are the same test in two units. Proof of coverage: ``q_low > q`` needs at
+    least ``k`` draws above ``q``, and ``P(X > q) <= delta`` (right continuity), so its
+    probability is at most ``P(Bin(n, delta) >= k) < 1 - level``. Symmetrically
+    ``P(X >= q) >= delta``, and ``q_high < q`` needs at most ``k' - 1`` draws ``>= q``.
+    """
+    a = np.asarray(x, dtype=np.float64).reshape(-1)
+    known = a[~np.isnan(a)]
+    if np.any(known == -np.inf):
+        raise ValueError("sample values must be finite, +inf or NaN (unknown)")
+    n = int(a.size if n_total is None else n_total)
+    if n < a.size:
+        raise ValueError(f"n_total={n} is smaller than the sample size {a.size}")
+    delta = float(delta)
+    if not 0.0 < delta < 1.0:
+        raise SpecError(f"delta must lie in (0, 1), got {delta!r}", field="delta")
+    if n == 0:
+        return math.nan, -math.inf, math.inf
+    desc = np.sort(known)[::-1]
+    unknown = n - known.size
+    q_hat = (
+        float(np.quantile(known, 1.0 - delta, method="inverted_cdf")) if known.size else math.nan
+    )
+    k_low = _first_true(lambda k: float(clopper_pearson_lower(k, n, level)) > delta, 1, n)
+    q_low = float(desc[k_low - 1]) if k_low is not None and k_low <= desc.size else -math.inf
+    # largest k' with upper(k' - 1) <= delta  <=>  (smallest j with upper(j) > delta) = k'
+    j = _first_true(lambda j: float(clopper_pearson_upper(j, n, level)) > delta, 0, n - 1)
+    k_high = n if j is None else j
+    padded = np.concatenate([np.full(unknown, np.inf), desc])
+    q_high = float(padded[k_high - 1]) if k_high >= 1 else math.inf
+    return q_hat, q_low, q_high
 
 
 @dataclass(frozen=True)
@@ -220,6 +378,11 @@ class GapStats:
     max_mean, argmax_time, max_ci_low, max_ci_high
         ``max_t mean`` (a finite-grid estimate of the gap's ``Upsilon_T``), the time where it is
         attained, and the t interval there.
+    powers, power_sums, tail_counts
+        The raw sums behind the above (one-sided bounds and Bonferroni levels are computed from
+        them in :mod:`drip_cert.validate`).
+    path_max
+        ``(n,)``: ``max_t r_t`` over the recorded times of every valid path, in path order.
     """
 
     name: str
@@ -239,6 +402,10 @@ class GapStats:
     argmax_time: float
     max_ci_low: float
     max_ci_high: float
+    powers: tuple[int, ...]
+    power_sums: np.ndarray
+    tail_counts: np.ndarray
+    path_max: np.ndarray
 
     def to_dict(self) -> dict:
         """JSON-ready summary (maximum over time, final-time values, tails at the final time)."""
@@ -302,6 +469,10 @@ def finalize(name: str, sums: GapSums, times: np.ndarray, level: float) -> GapSt
         argmax_time=tmax,
         max_ci_low=mlo,
         max_ci_high=mhi,
+        powers=sums.powers,
+        power_sums=sums.power_sums,
+        tail_counts=sums.tail_counts,
+        path_max=sums.path_max,
     )
 
 

@@ -1,0 +1,321 @@
+"""The validation checks (drip_cert.validate) on synthetic gap samples, and one CLI run.
+
+Each test builds per-path gap norms ``r`` (paths x recorded times) with a seeded generator, turns
+them into the engine's statistics with :mod:`drip_cert.sim.stats`, and calls the check functions
+directly: no simulation, except the last test, which runs ``drip-cert validate --quick``.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, field
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from drip_cert.sim.stats import accumulate, clopper_pearson_lower, finalize, new_sums, t_one_sided
+from drip_cert.validate import (
+    HOLDS,
+    NOT_CHECKED,
+    NOTHING_CHECKED,
+    VIOLATED,
+    check_mean,
+    check_radius,
+    check_tail,
+    checks_from_result,
+    overall_status,
+)
+
+LEVEL = 0.95
+"""The engine's default confidence level (SimConfig.ci_level)."""
+
+N_PATHS = 400
+"""Paths per synthetic sample: enough for the Clopper-Pearson and t bounds to resolve the
+margins used below (0.3 vs 0.1, 0.5 vs 0.3), small enough to stay instant."""
+
+N_TIMES = 21
+"""Recorded times of a synthetic sample (Bonferroni divides 1 - LEVEL by this)."""
+
+TIMES = np.linspace(0.0, 2.0, N_TIMES)
+
+NOISE_EXCESS = 1e-3
+"""Relative excess of a point estimate over its bound that is pure sampling noise: far below the
+standard error of an L_2 norm from N_PATHS exponential draws (~5% relative)."""
+
+RHO_TASIL, DELTA_TASIL = 1.0, 0.1
+RHO_L1, P, KAPPA, DELTA_L1 = 0.5, 1, 2.0, 0.2
+"""Certified numbers of the synthetic certificate (any positive values; kappa >= rho_L1 as in
+L1-DRAC (130a), kappa = rho_L1 delta^(-1/(2p)) = 0.5 * 0.2^(-1/2) ~ 1.1, rounded up)."""
+
+
+def _stats(name: str, r: np.ndarray, valid: np.ndarray | None = None, p_max: int = 4):
+    """The engine's GapStats of the per-path norms ``r`` (paths x times)."""
+    kappas = (KAPPA, RHO_TASIL + KAPPA)
+    valid = np.ones(len(r), dtype=bool) if valid is None else valid
+    sums = accumulate(new_sums(r.shape[1], p_max, kappas), r, valid)
+    return finalize(name, sums, TIMES, LEVEL)
+
+
+@dataclass
+class _FakeResult:
+    """What checks_from_result reads from a SimResult."""
+
+    gaps: dict
+    n_paths_done: int
+    config: SimpleNamespace = field(default_factory=lambda: SimpleNamespace(ci_level=LEVEL))
+
+    def gap(self, name):
+        return self.gaps[name]
+
+
+def _result(policy: np.ndarray, unc: np.ndarray, total: np.ndarray, **valid) -> _FakeResult:
+    gaps = {
+        "policy": _stats("policy", policy, valid.get("policy")),
+        "uncertainty_l1": _stats("uncertainty_l1", unc, valid.get("unc")),
+        "total_l1": _stats("total_l1", total, valid.get("total")),
+    }
+    return _FakeResult(gaps, len(policy))
+
+
+def _small(seed: int, scale: float) -> np.ndarray:
+    """Norms well inside every bound: exponential with mean ``scale``, zero at t = 0."""
+    r = np.random.default_rng(seed).exponential(scale, size=(N_PATHS, N_TIMES))
+    r[:, 0] = 0.0
+    return r
+
+
+def _certified(**kw):
+    args = {
+        "rho_tasil": RHO_TASIL,
+        "delta_tasil": DELTA_TASIL,
+        "rho_l1": RHO_L1,
+        "p": P,
+        "kappa": KAPPA,
+        "delta_l1": DELTA_L1,
+    }
+    return {**args, **kw}
+
+
+def _by_name(checks):
+    return {c["name"]: c for c in checks}
+
+
+# ---------------------------------------------------------------------------------- statuses
+
+
+def test_within_bounds_holds():
+    res = _result(_small(0, 0.05), _small(1, 0.05), _small(2, 0.1))
+    checks = _by_name(checks_from_result(res, **_certified()))
+    for name in (
+        "policy_radius",
+        "uncertainty_gap",
+        "uncertainty_L2_norm",
+        "tail_frequency",
+        "total_tail",
+    ):
+        assert checks[name]["status"] == HOLDS, (name, checks[name]["reason"])
+        assert checks[name]["holds"] is True
+        assert checks[name]["confidence_low"] <= checks[name]["bound"]
+        assert checks[name]["ratio"] > 1.0
+    # the expectation numbers next to radii are information only, never "holds"
+    for name in ("policy_gap", "total_gap"):
+        assert checks[name]["status"] == NOT_CHECKED
+        assert checks[name]["reason"].startswith("information only")
+    assert overall_status(list(checks.values())) == HOLDS
+
+
+def test_nothing_finite_checked_is_nothing_checked():
+    res = _result(_small(0, 0.05), _small(1, 0.05), _small(2, 0.1))
+    checks = checks_from_result(
+        res, rho_tasil=math.inf, delta_tasil=0.1, rho_l1=None, p=1, kappa=None, delta_l1=None
+    )
+    assert all(c["status"] == NOT_CHECKED and c["holds"] is False for c in checks)
+    assert all(c["reason"] for c in checks)
+    assert overall_status(checks) == NOTHING_CHECKED
+    assert overall_status([]) == NOTHING_CHECKED
+
+
+def test_vacuous_tasil_radius_is_not_checked():
+    res = _result(_small(0, 0.05), _small(1, 0.05), _small(2, 0.1))
+    checks = _by_name(checks_from_result(res, **_certified(rho_tasil=math.inf)))
+    assert checks["policy_radius"]["status"] == NOT_CHECKED
+    assert "vacuous" in checks["policy_radius"]["reason"]
+    # the total needs rho_TaSIL too; the L1 checks do not
+    assert checks["total_tail"]["status"] == NOT_CHECKED
+    assert checks["tail_frequency"]["status"] == HOLDS
+
+
+def test_nan_empirical_is_not_checked_never_holds():
+    nan = np.full(N_TIMES, np.nan)
+    c = check_mean("m", nan, nan, N_PATHS, 1.0, LEVEL, times=TIMES)
+    assert c["status"] == NOT_CHECKED and not c["holds"]
+    # NaN at one time only, the others far inside the bound: the sup over t is unknown
+    s1 = np.full(N_TIMES, 0.1 * N_PATHS)
+    s2 = np.full(N_TIMES, 0.02 * N_PATHS)
+    s1[5] = np.nan
+    c = check_mean("m", s1, s2, N_PATHS, 1.0, LEVEL, times=TIMES)
+    assert c["status"] == NOT_CHECKED and "non-finite" in c["reason"]
+    # a per-path sample of NaNs: nothing is known
+    c = check_radius("r", np.full(50, np.nan), 1.0, 0.1, LEVEL)
+    assert c["status"] == NOT_CHECKED and not c["holds"]
+    # no valid path for a tail check
+    c = check_tail("t", np.zeros(N_TIMES), 0, 1.0, 0.1, LEVEL, n_total=N_PATHS)
+    assert c["status"] == NOT_CHECKED and "no valid paths" in c["reason"]
+
+
+def test_not_at_certified_parameters_never_counts_but_the_policy_radius_does():
+    res = _result(_small(0, 0.05), _small(1, 0.05), _small(2, 0.1))
+    checks = _by_name(
+        checks_from_result(
+            res, **_certified(), at_certified_l1=False, not_certified_why="practical T_s"
+        )
+    )
+    for name in ("uncertainty_gap", "uncertainty_L2_norm", "tail_frequency", "total_tail"):
+        assert checks[name]["status"] == NOT_CHECKED
+        assert "not at certified parameters" in checks[name]["reason"]
+        assert "not at certified parameters" in checks[name]["note"]
+    # the two nominal processes do not involve the L1-DRAC parameters
+    assert checks["policy_radius"]["status"] == HOLDS
+
+
+# ------------------------------------------------------------------------ like with like
+
+
+def test_radius_violated_although_the_mean_is_below_rho():
+    rng = np.random.default_rng(3)
+    policy = rng.uniform(0.0, 0.1 * RHO_TASIL, size=(N_PATHS, N_TIMES))
+    out = rng.permutation(N_PATHS)[: int(0.3 * N_PATHS)]  # 30% of the paths leave the radius...
+    when = rng.integers(1, N_TIMES, size=out.size)  # ...each at one (random) time
+    policy[out, when] = 2.0 * RHO_TASIL
+    res = _result(policy, _small(1, 0.05), _small(2, 0.1))
+    checks = _by_name(checks_from_result(res, **_certified()))
+    rad = checks["policy_radius"]
+    assert rad["status"] == VIOLATED and rad["holds"] is False
+    assert rad["exceed_frequency"] == pytest.approx(0.3, abs=0.5 / N_PATHS)
+    assert rad["exceed_confidence_low"] > DELTA_TASIL
+    # the same test in radius units: the lower confidence bound of the 0.9-quantile exceeds rho
+    assert rad["confidence_low"] > RHO_TASIL and rad["empirical"] == 2.0 * RHO_TASIL
+    # the old comparison, max_t E||x' - x*|| against rho_TaSIL, would have said "holds"
+    pol = res.gap("policy")
+    assert pol.max_mean < RHO_TASIL
+    _, mean_low, _ = t_one_sided(pol.power_sums[0], pol.power_sums[1], pol.n, LEVEL)
+    assert np.max(mean_low) < RHO_TASIL
+    assert checks["policy_gap"]["empirical"] < checks["policy_gap"]["bound"]
+    assert checks["policy_gap"]["status"] == NOT_CHECKED  # reported, not checked
+    assert overall_status(list(checks.values())) == VIOLATED
+
+
+def test_radius_frequency_test_and_quantile_bound_agree():
+    rng = np.random.default_rng(4)
+    for frac in (0.0, 0.08, 0.12, 0.16, 0.3):
+        x = rng.uniform(0.0, 0.5, size=N_PATHS)
+        x[: int(frac * N_PATHS)] = 1.5
+        c = check_radius("r", x, 1.0, 0.1, LEVEL)
+        assert (c["confidence_low"] > 1.0) == (c["exceed_confidence_low"] > 0.1)
+        assert c["status"] == (VIOLATED if c["exceed_confidence_low"] > 0.1 else HOLDS)
+
+
+def test_total_uses_rho_tasil_plus_kappa_and_delta_sum():
+    rng = np.random.default_rng(5)
+    thr = RHO_TASIL + KAPPA
+    total = _small(2, 0.1)
+    # 28% of the paths beyond rho_TaSIL + kappa at every t > 0: more than delta_L1 = 0.2 alone
+    # allows (even at the Bonferroni level), less than delta_TaSIL + delta_L1 = 0.3
+    hit = rng.permutation(N_PATHS)[: int(0.28 * N_PATHS)]
+    total[hit, 1:] = 1.01 * thr
+    res = _result(_small(0, 0.05), _small(1, 0.05), total)
+    tot = _by_name(checks_from_result(res, **_certified()))["total_tail"]
+    assert tot["threshold"] == thr
+    assert tot["bound"] == pytest.approx(DELTA_TASIL + DELTA_L1, abs=1e-15)
+    assert tot["empirical"] == pytest.approx(0.28, abs=0.5 / N_PATHS)
+    assert tot["status"] == HOLDS
+    # the lower bound exceeds delta_L1 alone: the union bound is what makes it hold
+    assert tot["confidence_low"] > DELTA_L1
+    # at 50% beyond the threshold even delta_TaSIL + delta_L1 is exceeded
+    total[rng.permutation(N_PATHS)[: N_PATHS // 2], 1:] = 1.01 * thr
+    res = _result(_small(0, 0.05), _small(1, 0.05), total)
+    tot = _by_name(checks_from_result(res, **_certified()))["total_tail"]
+    assert tot["status"] == VIOLATED
+    # the frequency just AT the threshold counts too: (130a) and the union bound are for ">="
+    total = _small(2, 0.1)
+    total[: N_PATHS // 2, 1:] = thr
+    res = _result(_small(0, 0.05), _small(1, 0.05), total)
+    assert _by_name(checks_from_result(res, **_certified()))["total_tail"]["status"] == VIOLATED
+
+
+def test_l2p_norm_uses_a_lower_confidence_bound():
+    rng = np.random.default_rng(6)
+    r = rng.exponential(size=(N_PATHS, N_TIMES))
+    r[:, 0] = 0.0
+    # rescale so that the point estimate of the L_2 norm at the worst time is the bound plus noise
+    l2 = np.sqrt(np.mean(r**2, axis=0))
+    r *= RHO_L1 * (1.0 + NOISE_EXCESS) / l2.max()
+    res = _result(_small(0, 0.05), r, _small(2, 0.1))
+    lp = _by_name(checks_from_result(res, **_certified()))["uncertainty_L2_norm"]
+    assert lp["empirical"] > RHO_L1  # the point estimate says "above the bound"...
+    assert lp["confidence_low"] < RHO_L1  # ...the lower confidence bound does not
+    assert lp["status"] == HOLDS
+    # a clear excess is a violation
+    res = _result(_small(0, 0.05), 1.5 * r, _small(2, 0.1))
+    lp = _by_name(checks_from_result(res, **_certified()))["uncertainty_L2_norm"]
+    assert lp["status"] == VIOLATED and lp["confidence_low"] > RHO_L1
+    # the mean gap against rho_L1 is the weaker (E|.| <= L_2p) comparison of the same sample
+    mean = _by_name(checks_from_result(res, **_certified()))["uncertainty_gap"]
+    assert mean["empirical"] < lp["empirical"]
+
+
+def test_tail_frequency_clopper_pearson_with_bonferroni():
+    counts = np.zeros(N_TIMES)
+    counts[7] = 0.3 * N_PATHS
+    c = check_tail("t", counts, N_PATHS, KAPPA, DELTA_L1, LEVEL, times=TIMES)
+    per_t = 1.0 - (1.0 - LEVEL) / N_TIMES
+    assert c["per_time_level"] == pytest.approx(per_t, abs=1e-15)
+    assert c["confidence_low"] == pytest.approx(
+        float(clopper_pearson_lower(counts[7], N_PATHS, per_t)), abs=1e-15
+    )
+    assert c["time"] == TIMES[7] and c["status"] == VIOLATED
+
+
+def test_diverged_paths_make_a_hold_inconclusive_but_not_a_violation():
+    x = np.random.default_rng(7).uniform(0.0, 0.5, size=N_PATHS)
+    # 5% above rho among the valid ones; 10% of the paths diverged (unknown)
+    x[: N_PATHS // 20] = 2.0
+    c = check_radius("r", x, 1.0, 0.1, LEVEL, n_total=N_PATHS + N_PATHS // 10)
+    assert c["status"] == NOT_CHECKED and "inconclusive" in c["reason"]
+    x[: N_PATHS // 3] = 2.0
+    c = check_radius("r", x, 1.0, 0.1, LEVEL, n_total=N_PATHS + N_PATHS // 10)
+    assert c["status"] == VIOLATED
+    # moments: a diverged path's contribution is unbounded, so no "holds"
+    s1, s2 = np.full(N_TIMES, 0.01 * N_PATHS), np.full(N_TIMES, 0.001 * N_PATHS)
+    c = check_mean("m", s1, s2, N_PATHS, 1.0, LEVEL, n_total=N_PATHS + 1, times=TIMES)
+    assert c["status"] == NOT_CHECKED and "inconclusive" in c["reason"]
+
+
+# ---------------------------------------------------------------------------- end to end
+
+
+def test_cli_validate_exit_status_matches_report_status(capsys):
+    from drip_cert.cli import main
+
+    code = main(
+        [
+            "validate",
+            "examples/infeasible_2d/infeasible_2d.toml",
+            "--quick",
+            "--json",
+            "--trajectories",
+            "50",
+            "--seed",
+            "0",
+        ]
+    )
+    rep = json.loads(capsys.readouterr().out)
+    assert rep["status"] in (HOLDS, VIOLATED, NOTHING_CHECKED)
+    assert rep["holds"] is (rep["status"] == HOLDS)
+    assert code == (0 if rep["status"] == HOLDS else 1)
+    # infeasible L1-DRAC: no L1 check may count
+    for c in rep["checks"]:
+        if c["name"] in ("uncertainty_gap", "uncertainty_L2_norm", "tail_frequency", "total_tail"):
+            assert c["status"] == NOT_CHECKED
