@@ -3,9 +3,14 @@
 from __future__ import annotations
 
 import json
+import math
+from fractions import Fraction
 
+import mpmath as mp
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from scipy.integrate import solve_ivp
 
 from drip_cert.analysis.iss import delta_iss, discrete_bound
@@ -145,7 +150,10 @@ def test_provenance_and_errors():
     r = delta_iss(Quantity("lambda", LAM, How.SOUND), Quantity("Delta_g", GF, How.EXACT), G2)
     assert r.how == How.GIVEN  # a bare float is user-given
     q = r.gain()
-    assert q.name == "gamma_0" and "comparison lemma" in q.source and q.value == G2 / LAM
+    assert q.name == "gamma_0" and "comparison lemma" in q.source
+    # rounded up: at or one ulp above the exact 2/3 (which is not a float)
+    assert Fraction(q.value) >= Fraction(G2) / Fraction(LAM)
+    assert q.value <= math.nextafter(G2 / LAM, math.inf)
     assert r.gain(T=2.0).value == pytest.approx(G2 / LAM * (1 - np.exp(-LAM * 2.0)))
     est = delta_iss(Quantity("lambda", LAM, How.ESTIMATE), GF)
     assert est.how == How.ESTIMATE and est.g_norm2 == GF
@@ -156,3 +164,56 @@ def test_provenance_and_errors():
         delta_iss(1.0, 1.0, 2.0)
     with pytest.raises(SpecError, match="theta"):
         r.paper_gain(1.0, theta=2 * LAM / GF**2)
+
+
+# ------------------------------------------------------------------------ rounding of the gains
+
+#: mpmath reference precision (digits)
+MP_DPS = 50
+#: an outward-rounded closed form exceeds the exact value by a few ulps at most
+ROUNDED_REL_EXCESS = 1e-14
+
+_pos = st.floats(min_value=1e-6, max_value=1e3, allow_nan=False)
+
+
+@settings(max_examples=300)
+@given(lam=_pos, dg=_pos, frac=st.floats(0.0, 1.0))
+def test_asymptotic_gains_are_rounded_up(lam, dg, frac):
+    g2 = dg * frac
+    r = delta_iss(Quantity("lambda", lam, How.SOUND), Quantity("Delta_g", dg, How.SOUND), g2)
+    assert Fraction(r.tight_gain_asymptotic) >= Fraction(r.g_norm2) / Fraction(lam)
+    assert Fraction(r.paper_gain_asymptotic) >= Fraction(dg) / Fraction(lam)
+
+
+def test_float_division_would_understate_the_gain():
+    # 1/3 rounds DOWN in float: the old unrounded gain was below the true gain
+    assert Fraction(1.0 / 3.0) < Fraction(1, 3)
+    r = delta_iss(Quantity("lambda", 3.0, How.EXACT), Quantity("Delta_g", 1.0, How.EXACT))
+    assert Fraction(r.tight_gain_asymptotic) > Fraction(1, 3)
+    assert Fraction(r.gain().value) > Fraction(1, 3)
+
+
+@settings(max_examples=100)
+@given(lam=_pos, dg=_pos, T=st.floats(1e-6, 1e3), th=st.floats(1e-3, 1 - 1e-3))
+def test_finite_time_gains_are_rounded_up(lam, dg, T, th):
+    r = delta_iss(Quantity("lambda", lam, How.SOUND), Quantity("Delta_g", dg, How.SOUND))
+    theta = th * 2 * lam / dg**2
+    with mp.workdps(MP_DPS):
+        L, D, TT, TH = (mp.mpf(v) for v in (lam, dg, T, theta))
+        tight = D / L * (1 - mp.exp(-L * TT))
+        lt = 2 * L - TH * D**2
+        paper = mp.sqrt((1 - mp.exp(-lt * TT)) / (TH * lt))
+        paper_inf = 1 / mp.sqrt(TH * lt)
+    got = r.gain(T).value
+    assert got >= tight and got - tight <= ROUNDED_REL_EXCESS * tight
+    assert r.paper_gain_quantity(T, theta).value >= paper
+    assert r.paper_gain_quantity(None, theta).value >= paper_inf
+
+
+def test_labels_come_from_provenance_weakest():
+    exact = Quantity("lambda", LAM, How.EXACT)
+    # exact inputs: the rounded-up gain is a sound bound, not an exact value
+    assert delta_iss(exact, Quantity("Delta_g", GF, How.EXACT)).how == How.SOUND
+    assert delta_iss(exact, Quantity("Delta_g", GF, How.GIVEN)).how == How.GIVEN
+    est = Quantity("Delta_g", GF, How.ESTIMATE)
+    assert delta_iss(exact, est, Quantity("g", G2, How.GIVEN)).how == How.ESTIMATE

@@ -2,12 +2,14 @@
 
 from __future__ import annotations
 
+import mpmath as mp
 import numpy as np
 import pytest
 import scipy.linalg as sl
 
 from drip_cert.analysis.lognorm import (
     lambda_max_upper,
+    mu2_constant_bounds,
     mu2_interval_upper,
     mu_1,
     mu_2,
@@ -128,3 +130,92 @@ def test_interval_mu2_bound_contains_sampled_members():
         assert ub <= mu_2(C) + np.max(np.abs(np.linalg.eigvalsh(R + R.T))) + 1e-9
     A = rng.normal(size=(3, 3))
     assert mu_2(A) <= mu2_interval_upper(A, A) <= mu_2(A) + RIGOROUS_EXCESS * 10
+
+
+# --------------------------------------------------------------- mu_2 of a constant matrix
+
+#: mpmath reference precision (digits) for eigenvalues of constant matrices
+MP_DPS = 50
+#: mu2_constant_bounds is accurate to a few ulps RELATIVE to mu_2 (roots isolated to 53 bits)
+CONSTANT_REL_WIDTH = 1e-14
+
+
+def _mp_mu2(A) -> mp.mpf:
+    with mp.workdps(MP_DPS):
+        M = mp.matrix([[mp.mpf(v) if isinstance(v, float) else v for v in row] for row in A])
+        return max(mp.eigsy((M + M.T) / 2)[0])
+
+
+#: 2x2 with exact mu_2 = 2**-87 * (1 + O(2**-43)) ~ +6.46e-27: y = 1 + 2**-43, z = -(1 + 2**-42),
+#: det(S) = z(-1) - y^2 = -2**-86, trace ~ -2, so lambda_max ~ 2**-86 / 2 > 0
+_Y = 1.0 + 2.0**-43
+TINY_2X2 = np.array([[-1.0, _Y], [_Y, -(1.0 + 2.0**-42)]])
+#: 3x3 found by search (seed 0): exact mu_2 = +7.17e-21, float eigvalsh = -1.37e-16
+TINY_3X3 = np.array(
+    [
+        [-1.6075585623211075, -0.025284768316649872, 0.36672057749061926],
+        [-0.025284768316649872, -0.05504554059253014, 0.23489560260193748],
+        [0.36672057749061926, 0.23489560260193748, -1.0443437511493108],
+    ]
+)
+
+
+@pytest.mark.parametrize("A", [TINY_2X2, TINY_3X3], ids=["2x2", "3x3"])
+def test_tiny_positive_mu2_keeps_its_sign(A):
+    exact = _mp_mu2(A.tolist())
+    assert 0 < exact < 1e-20  # within rounding of 0, but positive: NOT contracting
+    # the old route: float eigvalsh says <= 0, i.e. "contracting with rate >= 0"
+    assert mu_2(A) <= 0.0
+    lo, hi = mu2_constant_bounds(A)
+    assert 0.0 < lo <= exact <= hi
+    assert mp.mpf(hi - lo) <= CONSTANT_REL_WIDTH * exact
+
+
+def test_tiny_2x2_has_the_closed_form_value():
+    lo, hi = mu2_constant_bounds(TINY_2X2)
+    with mp.workdps(MP_DPS):
+        y, z = mp.mpf(_Y), -(1 + mp.mpf(2) ** -42)
+        tr, det = -1 + z, -z - y * y
+        lam = (tr + mp.sqrt(tr * tr - 4 * det)) / 2
+    assert lo <= lam <= hi and mp.mpf(lo) > 6.4e-27
+
+
+def test_constant_bounds_contain_mpmath_eigenvalues_of_random_matrices():
+    rng = np.random.default_rng(21)
+    for n in (1, 2, 3, 5, 8):
+        for scale in (1e-6, 1.0, 1e6):
+            A = rng.normal(size=(n, n)) * scale
+            lo, hi = mu2_constant_bounds(A)
+            exact = _mp_mu2(A.tolist())
+            assert lo <= exact <= hi
+            assert hi - lo <= CONSTANT_REL_WIDTH * abs(float(exact))
+
+
+def test_constant_bounds_of_sympy_matrices():
+    import sympy as sp
+
+    # exact rationals go through the exact route (1/3 is not a float)
+    A = sp.Matrix([[sp.Rational(-1, 3), 1], [0, -3]])
+    lo, hi = mu2_constant_bounds(A)
+    with mp.workdps(MP_DPS):
+        exact = _mp_mu2([[mp.mpf(-1) / 3, 1], [0, -3]])
+    assert lo <= exact <= hi and hi - lo <= CONSTANT_REL_WIDTH
+    # irrational entries are enclosed in Arb and widen the bounds by their radius only
+    B = sp.Matrix([[-1, sp.sqrt(2)], [sp.pi / 10, -3]])
+    lo, hi = mu2_constant_bounds(B)
+    with mp.workdps(MP_DPS):
+        exact = _mp_mu2([[-1, mp.sqrt(2)], [mp.pi / 10, -3]])
+    assert lo <= exact <= hi and hi - lo <= 1e-14
+    with pytest.raises(SpecError, match="not constant"):
+        mu2_constant_bounds(sp.Matrix([[sp.Symbol("x")]]))
+
+
+def test_constant_bounds_fallback_above_the_exact_size(monkeypatch):
+    import drip_cert.analysis.lognorm as ln
+
+    monkeypatch.setattr(ln, "EXACT_MAX_DIM", 2)
+    A = np.random.default_rng(22).normal(size=(6, 6))
+    lo, hi = ln.mu2_constant_bounds(A)
+    exact = _mp_mu2(A.tolist())
+    assert lo <= exact <= hi and hi - lo <= RIGOROUS_EXCESS
+    assert ln.mu2_constant_bounds(np.array([[np.inf, 0.0], [0.0, 1.0]])) == (-np.inf, np.inf)

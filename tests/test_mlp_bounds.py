@@ -5,14 +5,19 @@ from __future__ import annotations
 
 import math
 
+import mpmath as mp
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from drip_cert._jax import jax, jnp
 from drip_cert.errors import SpecError
 from drip_cert.learn.mlp import MLP, activation_fn, init_mlp
 from drip_cert.learn.mlp_bounds import (
     activation_bounds,
+    enclose_activation,
+    enclose_activation_prime,
     enclose_jacobian,
     enclose_output,
     jacobian_lipschitz_bound,
@@ -22,6 +27,7 @@ from drip_cert.learn.mlp_bounds import (
     lipschitz_product,
 )
 from drip_cert.provenance import How
+from drip_cert.rounding import LIBM_REL, ndtr_rel_budget
 
 # a sup over a grid of spacing 1e-4 misses the true sup of a smooth function by O(h^2) ~ 1e-8
 GRID_SUP_TOL = 1e-7
@@ -36,7 +42,7 @@ LIPSDP_SLACK = 1e-5
 LIPSDP_EXACT_TOL = 1e-4
 # SCS (first order, eps ~1e-4 relative by default) may end a little above Clarabel's optimum
 SCS_VS_CLARABEL = 1.05
-# the one-hidden-layer scalar Jacobian-Lipschitz bound is exact up to the 1e-12 norm inflation
+# the one-hidden-layer scalar Jacobian-Lipschitz bound is exact up to outward rounding (a few ulps)
 EXACT_REL_TOL = 1e-10
 
 ACTS = ("tanh", "gelu")
@@ -244,3 +250,126 @@ def test_box_errors_name_the_problem():
         enclose_jacobian(net, np.ones(3), np.zeros(3))
     with pytest.raises(SpecError, match="shape"):
         enclose_output(net, np.zeros(2), np.zeros(2))
+
+
+# ----------------------------------------------------------------- rounding of activations
+
+#: mpmath reference precision (digits) for activation values
+MP_DPS = 50
+#: the old enclosures' relative pad (16 eps) and absolute pad (1e-300), reproduced as a contrast
+OLD_REL_PAD = 16.0 * np.finfo(np.float64).eps
+OLD_ABS_PAD = 1e-300
+#: the sech^2 enclosure of a point: exp widened by LIBM_REL on each side, plus a few ulps of the
+#: quotient (4 LIBM_REL ~ 7e-15 relative)
+TANH_PRIME_POINT_WIDTH = 4 * LIBM_REL
+#: a point enclosure of GELU is widened by the ndtr budget on each side, plus a few ulps
+GELU_POINT_WIDTHS = 3  # times ndtr_rel_budget(z), relative
+#: the Jacobian of the saturated one-neuron net: the sech^2 width plus the affine layers' gamma_n
+#: rounding terms (n = 1), all O(1e-15) relative; 1e-12 is a generous named ceiling
+JACOBIAN_POINT_WIDTH = 1e-12
+
+
+def _mp(f, z: float):
+    with mp.workdps(MP_DPS):
+        return f(mp.mpf(z))
+
+
+def _mp_tanh_prime(z):
+    return mp.sech(z) ** 2
+
+
+def _mp_gelu(z):
+    return z * mp.ncdf(z)
+
+
+def _mp_gelu_prime(z):
+    return mp.ncdf(z) + z * mp.npdf(z)
+
+
+def _old_enclosure(v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The previous code's outward pad of a float value (relative 16 eps, absolute 1e-300)."""
+    pad = np.abs(v) * OLD_REL_PAD + OLD_ABS_PAD
+    return np.nextafter(v - pad, -np.inf), np.nextafter(v + pad, np.inf)
+
+
+@pytest.mark.parametrize("z", [19.0, 20.0, 25.0, 40.0, -30.0])
+def test_tanh_prime_enclosure_where_one_minus_tanh_squared_cancels(z):
+    exact = _mp(_mp_tanh_prime, z)
+    # contrast: tanh(z)^2 rounds to 1, so the old formula gives 0 and its padded enclosure
+    # [~-1e-300, ~1e-300] misses the exact value (1.3e-16 at z = 19) entirely
+    t = np.tanh(np.array([z]))
+    old_lo, old_hi = _old_enclosure(1.0 - t * t)
+    assert not (old_lo[0] <= exact <= old_hi[0])
+    lo, hi = enclose_activation_prime("tanh", np.array([z]), np.array([z]))
+    assert lo[0] <= exact <= hi[0]
+    assert hi[0] - lo[0] <= TANH_PRIME_POINT_WIDTH * float(exact)
+
+
+@pytest.mark.parametrize("z", [-10.0, -20.0, -30.0])
+def test_gelu_enclosure_where_one_plus_erf_cancels(z):
+    from scipy.special import erf
+
+    exact = _mp(_mp_gelu, z)
+    # contrast: 1 + erf(z / sqrt 2) rounds to 0, so the old GELU is 0 and its enclosure misses
+    old = 0.5 * z * (1.0 + erf(np.array([z]) / np.sqrt(2.0)))
+    old_lo, old_hi = _old_enclosure(old)
+    assert not (old_lo[0] <= exact <= old_hi[0])
+    lo, hi = enclose_activation("gelu", np.array([z]), np.array([z]))
+    assert lo[0] <= exact <= hi[0]
+    assert hi[0] - lo[0] <= GELU_POINT_WIDTHS * ndtr_rel_budget(z) * abs(float(exact))
+
+
+_ends = st.floats(min_value=-60.0, max_value=60.0, allow_nan=False)
+
+
+@settings(max_examples=150)
+@given(a=_ends, b=_ends, u=st.floats(0.0, 1.0), act=st.sampled_from(ACTS))
+def test_activation_enclosures_contain_mpmath_values(a, b, u, act):
+    lo, hi = min(a, b), max(a, b)
+    f, fp = (mp.tanh, _mp_tanh_prime) if act == "tanh" else (_mp_gelu, _mp_gelu_prime)
+    ylo, yhi = enclose_activation(act, np.array([lo]), np.array([hi]))
+    dlo, dhi = enclose_activation_prime(act, np.array([lo]), np.array([hi]))
+    for z in (lo, hi, lo + u * (hi - lo)):
+        assert ylo[0] <= _mp(f, z) <= yhi[0]
+        assert dlo[0] <= _mp(fp, z) <= dhi[0]
+
+
+def test_saturated_tanh_network_jacobian_enclosure_contains_the_exact_jacobian():
+    # x -> w1 tanh(w0 x + b0): at x = 1 the pre-activation is 22, tanh' = sech^2(22) ~ 3.1e-19;
+    # the old enclosure was [0, 1e-300], i.e. it claimed the Jacobian is (practically) zero
+    net = MLP((np.array([[20.0]]), np.array([[3.0]])), (np.array([2.0]), np.array([0.0])), "tanh")
+    x = np.array([1.0])
+    jlo, jhi = enclose_jacobian(net, x, x)
+    exact = 3 * 20 * _mp(_mp_tanh_prime, 22.0)
+    assert jlo[0, 0] <= exact <= jhi[0, 0] and jlo[0, 0] > 0
+    assert jhi[0, 0] - jlo[0, 0] <= JACOBIAN_POINT_WIDTH * float(exact)
+
+
+def test_activation_constants_are_arb_bounds_of_the_closed_forms():
+    tanh, gelu = activation_bounds("tanh"), activation_bounds("gelu")
+    with mp.workdps(MP_DPS):
+        s2 = mp.sqrt(2)
+        assert tanh.abs_curv >= 4 / (3 * mp.sqrt(3))
+        assert gelu.slope_hi >= _mp_gelu_prime(s2) and gelu.slope_lo <= _mp_gelu_prime(-s2)
+        assert gelu.abs_curv >= mp.sqrt(2 / mp.pi)
+        assert gelu.slope_hi - _mp_gelu_prime(s2) < 1e-15
+
+
+def test_output_bound_and_products_are_rounded_up():
+    from fractions import Fraction
+
+    from drip_cert.analysis.closed_loop import mlp_output_bound
+
+    # || |W| 1 + |b| || for a tanh net: 1/3 and 1/10 are not floats, the bound must cover the
+    # exact norm of the float entries
+    W1 = np.array([[1 / 3, -0.1, 0.7], [0.2, 0.3, -1 / 7]])
+    b1 = np.array([0.1, -1 / 9])
+    net = MLP((np.eye(3), W1), (np.zeros(3), b1), "tanh")
+    rows = [sum((Fraction(abs(v)) for v in (*W1[i], b1[i])), Fraction(0)) for i in range(2)]
+    assert Fraction(mlp_output_bound(net)) ** 2 >= sum(r * r for r in rows)
+    # the product bound covers the exact product of exact spectral norms (mpmath SVD)
+    with mp.workdps(MP_DPS):
+        exact = 1
+        for w in net.weights:
+            exact *= max(mp.svd_r(mp.matrix(w.tolist()), compute_uv=False))
+    assert lipschitz_product(net).value >= exact

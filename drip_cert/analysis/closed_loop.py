@@ -30,6 +30,21 @@ import sympy as sp
 from drip_cert.analysis.constants import batch_fn, growth_ratio_estimate, holder_estimate
 from drip_cert.learn.mlp import MLP
 from drip_cert.provenance import How, Quantity
+from drip_cert.rounding import (
+    add_down_np,
+    add_up,
+    add_up_np,
+    div_up,
+    matmul_bounds,
+    mul_up,
+    norm2_up_np,
+    spectral_norm_upper,
+    sq_up,
+    sqrt_up,
+    sub_down_np,
+    sum_up_np,
+    up_np,
+)
 from drip_cert.system.blocks import block_applications
 from drip_cert.system.system import System
 
@@ -83,10 +98,11 @@ def affine_in_blocks(exprs: sp.MatrixBase, s: System) -> AffineBlocks | None:
 
 
 def mlp_output_bound(mlp: MLP) -> float:
-    """``sup_x ||mlp(x)||_2`` for bounded hidden activations (tanh), else ``inf``.
+    """``sup_x ||mlp(x)||_2`` for bounded hidden activations (tanh), else ``inf`` (rounded up).
 
     The last hidden layer outputs lie in ``[-1, 1]^w`` for tanh, so the affine output layer gives
-    ``||W z + b|| <= || |W| 1 + |b| ||`` entrywise. (GELU is unbounded: ``inf``.)
+    ``||W z + b|| <= || |W| 1 + |b| ||`` entrywise (row sums and the norm rounded up). A tanh
+    output layer gives ``sqrt(out_dim)``. (GELU is unbounded: ``inf``.)
     """
     if (
         mlp.activation != "tanh"
@@ -95,9 +111,58 @@ def mlp_output_bound(mlp: MLP) -> float:
     ):
         return math.inf
     if mlp.output_activation == "tanh":
-        return math.sqrt(mlp.out_dim)
+        return sqrt_up(float(mlp.out_dim))
     W, b = mlp.weights[-1], mlp.biases[-1]
-    return float(np.linalg.norm(np.abs(W) @ np.ones(W.shape[1]) + np.abs(b))) * (1 + 1e-12)
+    rows = sum_up_np(np.concatenate([np.abs(W), np.abs(b)[:, None]], axis=1), axis=1)
+    return float(norm2_up_np(rows))
+
+
+CONVERSION_ULPS = 2
+"""``affine_in_blocks`` converts the sympy coefficients with ``float()``: exact for floats,
+correctly rounded for rationals (``int / int``) and within an ulp for other constants
+(``evalf``), so each entry is within ``CONVERSION_ULPS`` spacings of the true coefficient."""
+
+
+def _norm_of_converted(M: np.ndarray, spectral: bool) -> float:
+    """Upper bound of the spectral (matrix) or Euclidean (vector) norm of the true coefficients
+    whose floats are ``M``: the norm of ``M`` plus the Frobenius norm of the conversion radius
+    (``||X||_2 <= ||X||_F`` bounds the spectral norm of the error)."""
+    M = np.asarray(M, dtype=float)
+    base = float(spectral_norm_upper(M)) if spectral else float(norm2_up_np(M.ravel()))
+    rad = CONVERSION_ULPS * np.spacing(np.abs(M)).ravel()  # exact: a power-of-two multiple
+    return add_up(base, float(norm2_up_np(rad)))
+
+
+def _box_radius_up(box: np.ndarray) -> float:
+    """``max_{x in box} ||x||`` (the farthest corner), rounded up: ``sqrt(sum max(lo^2, hi^2))``."""
+    return float(norm2_up_np(np.max(np.abs(box), axis=1)))
+
+
+def _f_at_zero_up(dec: AffineBlocks, s: System) -> float:
+    """Upper bound of ``||F(0)|| = ||c + sum_k C_k h_k(0)||``: each ``h_k(0)`` enclosed by
+    interval bound propagation, the affine combination in interval arithmetic."""
+    from drip_cert.learn.mlp_bounds import enclose_output
+
+    c = np.asarray(dec.c, dtype=float)
+    rad_c = CONVERSION_ULPS * np.spacing(np.abs(c))  # the conversion of the true c to floats
+    lo = sub_down_np(c, rad_c)
+    hi = add_up_np(c, rad_c)
+    for b, C in dec.C.items():
+        mlp = s.blocks[b].mlp
+        zero = np.zeros(mlp.in_dim)
+        hlo, hhi = enclose_output(mlp, zero, zero)
+        # C h for h in [hlo, hhi]: centre-radius with the product rounding (matmul_bounds), plus
+        # the conversion radius of C times |h|
+        m = 0.5 * hlo + 0.5 * hhi
+        r = up_np(np.maximum(hhi - m, m - hlo))
+        clo, chi = matmul_bounds(C, m[:, None])
+        rad = matmul_bounds(np.abs(C), r[:, None])[1][:, 0]
+        habs = np.maximum(np.abs(hlo), np.abs(hhi))
+        conv = matmul_bounds(CONVERSION_ULPS * np.spacing(np.abs(C)), habs[:, None])[1][:, 0]
+        rad = add_up_np(rad, conv)
+        lo = sub_down_np(add_down_np(lo, clo[:, 0]), rad)
+        hi = add_up_np(add_up_np(hi, chi[:, 0]), rad)
+    return float(norm2_up_np(np.maximum(np.abs(lo), np.abs(hi))))
 
 
 @dataclass(frozen=True)
@@ -131,51 +196,52 @@ def closed_loop_constants(
     from drip_cert.learn.mlp_bounds import lipschitz_bound
 
     F = s.closed_loop(which)
-    box = np.array(s.support)
-    r0 = float(np.max(np.linalg.norm(np.array(np.meshgrid(*box)).reshape(s.n, -1).T, axis=1)))
+    box = np.array(s.support, dtype=float)
+    r0 = _box_radius_up(box)
     dec = affine_in_blocks(F, s)
     src_f = "L1-DRAC Assumption 1 (nominal drift = closed loop under the policy)"
     src_l = "L1-DRAC Assumption 8"
     src_s = "L1-DRAC Assumption 3"
     if dec is not None and all(s.blocks[b].mlp is not None for b in dec.C):
-        nA = float(np.linalg.norm(dec.A, 2))
-        beta = float(np.linalg.norm(dec.c))
+        # every norm is a rigorous upper bound and every operation is rounded up (all terms >= 0)
+        nA = _norm_of_converted(dec.A, spectral=True)
+        beta = _norm_of_converted(dec.c, spectral=False)
         lip = nA
+        lips = []
         for b, C in dec.C.items():
             mlp = s.blocks[b].mlp
-            nC = float(np.linalg.norm(C, 2))
-            beta += nC * mlp_output_bound(mlp)
-            lip += nC * lipschitz_bound(mlp).value
-        up = 1 + 1e-12  # covers the rounding of the few float operations above
-        dF = Quantity(
+            nC = _norm_of_converted(C, spectral=True)
+            Lh = lipschitz_bound(mlp)
+            lips.append(Lh)
+            beta = add_up(beta, mul_up(nC, mlp_output_bound(mlp)))
+            lip = add_up(lip, mul_up(nC, Lh.value))
+        dF = Quantity.derive(
             "Delta_f",
-            math.sqrt(nA**2 + beta**2) * up,
-            How.SOUND,
-            src_f,
-            f"F = A a + c + sum C h(a): sqrt(||A||^2 + beta^2), ||A|| = {nA:.6g}, "
-            f"beta = ||c|| + sum ||C|| sup||h|| = {beta:.6g}",
+            sqrt_up(add_up(sq_up(nA), sq_up(beta))),
+            method=How.SOUND,
+            source=src_f,
+            note=f"F = A a + c + sum C h(a): sqrt(||A||^2 + beta^2), ||A|| = {nA:.6g}, "
+            f"beta = ||c|| + sum ||C|| sup||h|| = {beta:.6g} (norms and sums rounded up)",
         )
-        lF = Quantity(
+        lF = Quantity.derive(
             "L_f",
-            lip * up,
-            How.SOUND,
-            src_l,
-            "||A|| + sum ||C|| Lip(h) (spectral-norm product bound of each MLP)",
+            lip,
+            inputs=lips,
+            method=How.SOUND,
+            source=src_l,
+            note="||A|| + sum ||C|| Lip(h) (spectral-norm product bound of each MLP)",
         )
-        F0 = float(
-            np.linalg.norm(
-                dec.c + sum(C @ s.blocks[b].evaluate_np(np.zeros(s.n)) for b, C in dec.C.items())
-            )
-        )
-        bound = r0 + F0 / lam.value
-        how = How.SOUND if (global_rate and lam.how in (How.EXACT, How.SOUND)) else How.ESTIMATE
-        dS = Quantity(
+        F0 = _f_at_zero_up(dec, s)
+        bound = add_up(r0, div_up(F0, lam.value))
+        global_ok = global_rate and lam.how.proved
+        dS = Quantity.derive(
             "Delta_star",
-            bound * up,
-            how,
-            src_s,
-            f"max_box ||x0|| + ||F(0)||/lambda = {r0:.6g} + {F0:.6g}/{lam.value:.6g}"
-            + ("" if how == How.SOUND else " (rate not global: estimate)"),
+            bound,
+            inputs=[lam],
+            method=How.SOUND if global_ok else How.ESTIMATE,
+            source=src_s,
+            note=f"max_box ||x0|| + ||F(0)||/lambda = {r0:.6g} + {F0:.6g}/{lam.value:.6g}"
+            + ("" if global_ok else " (rate not global: estimate)"),
         )
         return ClosedLoopConstants(dF, lF, dS)
     # sampled estimates

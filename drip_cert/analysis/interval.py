@@ -9,13 +9,20 @@ Soundness of the rounding
 -------------------------
 * ``+ - * /`` are computed in IEEE-754 double precision, which rounds correctly to nearest;
   moving the result one ulp outward (``math.nextafter``) therefore gives a rigorous bound.
-* Elementary functions (exp, log, sin, tanh, ...) are evaluated with python-flint's ``arb`` balls
-  (Arb, rigorous error bounds) at the interval's endpoints; the ball's lower/upper end is
-  converted to a float and moved one ulp outward. Monotone functions take their extremes at the
-  endpoints; sin/cos/cosh/Abs also check (with a rigorous enclosure of pi) whether an interior
-  extremum lies in the interval.
+* Elementary functions (exp, log, sin, tanh, sech, erf, erfc, ...) are evaluated with
+  python-flint's ``arb`` balls (Arb, rigorous error bounds) at the interval's endpoints; the
+  ball's lower/upper end is converted to a float and moved one ulp outward. Monotone functions
+  take their extremes at the endpoints; sin/cos also check (with a rigorous enclosure of pi)
+  whether an interior extremum lies in the interval, cosh/sech/Abs whether 0 does.
 * ``x**2k`` of an interval that contains 0 is ``[0, max(|lo|, |hi|)**2k]``, not the product
   ``x * x`` (which would give a negative lower end).
+* Constant sub-expressions (``sqrt(2) * pi``) are enclosed through their own tree, in Arb.
+* The cancelling forms of activation derivatives are rewritten before compilation
+  (:func:`cancellation_free`): ``1 - tanh(u)^2 -> sech(u)^2`` (sympy's derivative of ``tanh``),
+  ``1 + erf(u) -> erfc(-u)`` and ``1 - erf(u) -> erfc(u)`` (GELU). The natural extension of the
+  left side is rigorous as well, but keeps no relative accuracy where it cancels.
+
+The rounding primitives are those of :mod:`drip_cert.rounding` (which states the guarantee).
 
 Applied undefined functions (sympy ``Function('h')(x1, x2)``, their ``Derivative`` and ``Subs``
 forms, standing for neural-network blocks) are passed to a user callback
@@ -28,6 +35,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
+from fractions import Fraction
 
 import numpy as np
 import sympy as sp
@@ -35,10 +43,12 @@ from flint import arb
 from sympy.core.function import AppliedUndef
 
 from drip_cert.errors import DripCertError
+from drip_cert.rounding import arb_hi, arb_lo, enclose_down, enclose_up
 
 __all__ = [
     "UnsupportedExpression",
     "opaque_functions",
+    "cancellation_free",
     "EncloseCallback",
     "compile_enclosure",
     "enclose_expr",
@@ -62,34 +72,13 @@ class UnsupportedExpression(DripCertError, NotImplementedError):
 
 
 # --------------------------------------------------------------------------------------------
-# outward rounding
+# outward rounding (owned by drip_cert.rounding; NaN from inf - inf means "no information")
 # --------------------------------------------------------------------------------------------
 
-
-def _dn(x: float) -> float:
-    """A float ``<=`` the exact result whose round-to-nearest value is ``x``."""
-    if x != x:  # NaN from inf - inf: no information
-        return -_INF
-    return math.nextafter(x, -_INF)
-
-
-def _up(x: float) -> float:
-    if x != x:
-        return _INF
-    return math.nextafter(x, _INF)
-
-
-def _arb_lo(v: arb) -> float:
-    """Float lower bound of an arb ball (one ulp below the nearest float of its lower end)."""
-    if not v.is_finite():
-        return -_INF
-    return _dn(float(v.lower()))
-
-
-def _arb_hi(v: arb) -> float:
-    if not v.is_finite():
-        return _INF
-    return _up(float(v.upper()))
+_dn = enclose_down
+_up = enclose_up
+_arb_lo = arb_lo
+_arb_hi = arb_hi
 
 
 def _exact(x: float) -> arb:
@@ -186,6 +175,31 @@ def _tanh(a: Interval) -> Interval:
 
 def _atan(a: Interval) -> Interval:
     return _atan_raw(a)
+
+
+_erf_raw = _monotone("erf")
+
+
+def _erf(a: Interval) -> Interval:
+    return _clip(_erf_raw(a), -1.0, 1.0)
+
+
+def _erfc(a: Interval) -> Interval:
+    """``erfc`` is decreasing, with values in ``(0, 2)``; no cancellation for large arguments
+    (the reason to prefer ``erfc(-u)`` over ``1 + erf(u)``)."""
+    lo, hi = a
+    vlo = 0.0 if hi == _INF else _arb_lo(_exact(hi).erfc())
+    vhi = 2.0 if lo == -_INF else _arb_hi(_exact(lo).erfc())
+    return _clip((vlo, vhi), 0.0, 2.0)
+
+
+def _sech(a: Interval) -> Interval:
+    """``sech`` is even and decreasing in ``|x|``, with values in ``(0, 1]``; ``sech(u)**2`` is the
+    cancellation-free form of ``tanh'(u) = 1 - tanh(u)**2``."""
+    m = _abs(a)
+    vlo = 0.0 if m[1] == _INF else _arb_lo(_exact(m[1]).sech())
+    vhi = _arb_hi(_exact(m[0]).sech())
+    return _clip((vlo, vhi), 0.0, 1.0)
 
 
 def _contains_point(lo: float, hi: float, offset: arb, period: arb) -> bool:
@@ -302,6 +316,9 @@ _UNARY: dict[type, Callable[[Interval], Interval]] = {
     sp.asinh: _asinh,
     sp.Abs: _abs,
     sp.sign: _sign,
+    sp.sech: _sech,
+    sp.erf: _erf,
+    sp.erfc: _erfc,
 }
 
 #: function heads with an interval extension here (everything else goes to the callback)
@@ -321,7 +338,11 @@ def _const(value: sp.Expr) -> Interval:
         f = float(int(value))
         return (f, f) if float(int(f)) == int(value) else (_dn(f), _up(f))
     if value.is_Rational:
-        v = arb(int(value.p)) / arb(int(value.q))
+        p, q = int(value.p), int(value.q)
+        f = p / q  # Python's int / int is correctly rounded
+        if math.isfinite(f) and Fraction(f) == Fraction(p, q):
+            return (f, f)  # a float exactly (1/2, -3/4): no widening
+        v = arb(p) / arb(q)
         return (_arb_lo(v), _arb_hi(v))
     if value is sp.pi:
         return (_arb_lo(_PI), _arb_hi(_PI))
@@ -332,7 +353,12 @@ def _const(value: sp.Expr) -> Interval:
         f = float(value)
         return (f, f) if sp.Rational(value) == sp.Rational(f) else (_dn(f), _up(f))
     if value.is_real:
-        f = float(value.evalf(30))
+        # sympy tracks the accuracy of evalf (mpmath, adaptive precision); strict=True raises
+        # instead of returning fewer than 30 correct digits, so the float is within one ulp
+        try:
+            f = float(value.evalf(30, strict=True))
+        except (sp.core.evalf.PrecisionExhausted, ValueError, TypeError) as exc:
+            raise UnsupportedExpression(f"constant {value} could not be evaluated") from exc
         return (_dn(_dn(f)), _up(_up(f)))
     raise UnsupportedExpression(f"constant {value} is not a real number")
 
@@ -380,9 +406,29 @@ def _compile(expr: sp.Expr, index: dict[sp.Symbol, int], enclose: EncloseCallbac
     if expr.is_Number or expr.is_NumberSymbol:
         c = _const(expr)
         return lambda box: c
-    if not expr.free_symbols and expr.is_real and not expr.has(AppliedUndef):
-        c = _const(expr)
+    if not expr.free_symbols and not expr.has(AppliedUndef):
+        c = _const_tree(expr)
         return lambda box: c
+    return _compile_op(expr, index, enclose)
+
+
+def _const_tree(expr: sp.Expr) -> Interval:
+    """Enclosure of a constant expression (no symbols): its own tree in interval arithmetic,
+    with Arb at the leaves and at every elementary function. Only a head with no interval
+    extension here falls back to :func:`_const` (sympy ``evalf`` at 30 digits with strict
+    accuracy checking, then two ulps outward)."""
+    if expr.is_real is False:
+        raise UnsupportedExpression(f"constant {expr} is not a real number")
+    try:
+        return _compile_op(expr, {}, None)(())
+    except UnsupportedExpression:
+        if expr.is_real:
+            return _const(expr)
+        raise
+
+
+def _compile_op(expr: sp.Expr, index: dict[sp.Symbol, int], enclose: EncloseCallback | None) -> _Fn:
+    """The interval extension of an operation node (sums, products, powers, functions)."""
     if expr.is_Add:
         parts = [_compile(a, index, enclose) for a in expr.args]
 
@@ -464,9 +510,47 @@ def _compile(expr: sp.Expr, index: dict[sp.Symbol, int], enclose: EncloseCallbac
         return undef
     raise UnsupportedExpression(
         f"no interval extension for {head.__name__} in {expr}; supported: + * / integer and "
-        "rational powers, exp log sqrt sin cos tan tanh atan sinh cosh asinh Abs sign Heaviside "
-        "Max Min, and undefined functions through an `enclose` callback"
+        "rational powers, exp log sqrt sin cos tan tanh sech atan sinh cosh asinh erf erfc Abs "
+        "sign Heaviside Max Min, and undefined functions through an `enclose` callback"
     )
+
+
+def _rewrite_add(expr: sp.Add) -> sp.Expr:
+    """``c - c tanh(u)^2 -> c sech(u)^2``, ``c + c erf(u) -> c erfc(-u)``,
+    ``c - c erf(u) -> c erfc(u)`` inside one sum (``c`` a number); other terms are kept."""
+    terms = list(expr.args)
+    consts = [t for t in terms if t.is_Number]
+    if len(consts) != 1:
+        return expr
+    c = consts[0]
+    for i, t in enumerate(terms):
+        k, rest = t.as_coeff_Mul()
+        repl = None
+        if rest.is_Pow and rest.exp == 2 and isinstance(rest.base, sp.tanh) and k == -c:
+            repl = c * sp.sech(rest.base.args[0]) ** 2
+        elif isinstance(rest, sp.erf) and k == c:
+            repl = c * sp.erfc(-rest.args[0], evaluate=False)  # no reflection to 2 - erfc
+        elif isinstance(rest, sp.erf) and k == -c:
+            repl = c * sp.erfc(rest.args[0])
+        if repl is not None:
+            others = [u for j, u in enumerate(terms) if j != i and u is not c]
+            return sp.Add(repl, *others, evaluate=False) if others else repl
+    return expr
+
+
+def cancellation_free(expr: sp.Expr) -> sp.Expr:
+    """``expr`` with the cancelling forms of activation derivatives rewritten.
+
+    ``1 - tanh(u)^2`` (sympy's derivative of ``tanh``) becomes ``sech(u)^2`` and ``1 + erf(u)`` /
+    ``1 - erf(u)`` become ``erfc(-u)`` / ``erfc(u)`` (the GELU forms), also with a common numeric
+    factor. Both sides are equal; the enclosure of the left side is rigorous too, but loses all
+    relative accuracy where the two terms nearly cancel (``tanh(20)^2`` rounds to 1), the right
+    side keeps it.
+    """
+    expr = sp.sympify(expr)
+    if not expr.has(sp.tanh, sp.erf):
+        return expr
+    return expr.replace(lambda e: e.is_Add, _rewrite_add)
 
 
 def compile_enclosure(
@@ -498,7 +582,7 @@ def compile_enclosure(
         domain violations and callback refusals).
     """
     index = {s: i for i, s in enumerate(variables)}
-    return _compile(sp.sympify(expr), index, enclose)
+    return _compile(cancellation_free(sp.sympify(expr)), index, enclose)
 
 
 def enclose_expr(

@@ -47,10 +47,12 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from flint import arb
 from scipy.optimize import minimize_scalar
 
 from drip_cert.errors import AssumptionViolation, SpecError
-from drip_cert.provenance import How, Quantity, json_float
+from drip_cert.provenance import How, Quantity, json_float, weakest
+from drip_cert.rounding import arb_hi, div_up
 
 __all__ = ["DeltaISSResult", "delta_iss", "discrete_bound"]
 
@@ -58,12 +60,10 @@ _PAPER = "DRIP Proposition 1 (prop:deltaISS)"
 _TIGHT = "comparison lemma, this project's derivation, valid under DRIP Assumption 2"
 
 
-def _weakest(*hows: How) -> How:
-    hs = {How(h) for h in hows}
-    for h in (How.ESTIMATE, How.GIVEN, How.SOUND):
-        if h in hs:
-            return h
-    return How.EXACT
+G_NORM_REL_TOL = 1e-12
+"""Relative tolerance of the input check ``sup ||g||_2 <= Delta_g`` (two bounds computed by
+different routes may disagree by rounding); a ``g_norm2`` above ``Delta_g`` is then replaced by
+``Delta_g``, which is valid because ``||g||_2 <= ||g||_F <= Delta_g``. Not a soundness pad."""
 
 
 @dataclass(frozen=True)
@@ -182,7 +182,7 @@ class DeltaISSResult:
 
         This is the ``gamma_0`` of the TaSIL certificate (math/tasil.md, Sec. 2-3).
         """
-        value = self.tight_gain_asymptotic if T is None else float(self.tight_gain(T))
+        value = self.tight_gain_asymptotic if T is None else _tight_gain_up(self, float(T))
         return Quantity(
             "gamma_0",
             value,
@@ -195,11 +195,7 @@ class DeltaISSResult:
     def paper_gain_quantity(self, T: float | None = None, theta: float | None = None) -> Quantity:
         """The paper's gain at ``T`` (its sup over ``t <= T``); ``T=None``: ``t -> inf``."""
         th = self._theta(theta)
-        value = (
-            1.0 / math.sqrt(th * self.lambda_theta(th))
-            if T is None
-            else float(self.paper_gain(T, th))
-        )
+        value = _paper_gain_up(self, th, None if T is None else float(T))
         return Quantity(
             "gamma_0_paper",
             value,
@@ -222,6 +218,23 @@ class DeltaISSResult:
             "source_paper": _PAPER,
             "source_used": _TIGHT,
         }
+
+
+def _tight_gain_up(r: DeltaISSResult, T: float) -> float:
+    """``(G_2 / lambda)(1 - e^{-lambda T})`` evaluated in Arb and rounded up."""
+    lam = arb(r.lam)
+    return arb_hi(arb(r.g_norm2) / lam * -(-lam * arb(T)).expm1())
+
+
+def _paper_gain_up(r: DeltaISSResult, theta: float, T: float | None) -> float:
+    """The paper's gain ``(theta lambda_theta)^{-1/2} (1 - e^{-lambda_theta T})^{1/2}``
+    (``T = None``: without the last factor) at the float ``theta``, in Arb, rounded up."""
+    th = arb(theta)
+    lt = 2 * arb(r.lam) - th * arb(r.delta_g) ** 2  # lambda_theta, exact up to Arb's radius
+    g2 = 1 / (th * lt)
+    if T is not None:
+        g2 = g2 * -(-lt * arb(T)).expm1()
+    return arb_hi(g2.sqrt())
 
 
 def _value(x: float | Quantity, name: str) -> tuple[float, How]:
@@ -270,7 +283,7 @@ def delta_iss(
         )
     if not (math.isfinite(dv) and dv > 0):
         raise SpecError(f"Delta_g must be finite and > 0, got {dv}", field="Delta_g")
-    if not (math.isfinite(gv) and 0 <= gv <= dv * (1 + 1e-12)):
+    if not (math.isfinite(gv) and 0 <= gv <= dv * (1 + G_NORM_REL_TOL)):
         raise SpecError(
             f"sup ||g||_2 = {gv} must lie in [0, Delta_g = {dv}] (the spectral norm never exceeds "
             "the Frobenius norm); check both bounds",
@@ -282,9 +295,9 @@ def delta_iss(
         delta_g=dv,
         g_norm2=gv,
         theta_star=lv / dv**2,
-        paper_gain_asymptotic=dv / lv,
-        tight_gain_asymptotic=gv / lv,
-        how=_weakest(lh, dh, gh),
+        paper_gain_asymptotic=div_up(dv, lv),
+        tight_gain_asymptotic=div_up(gv, lv),
+        how=weakest(How.SOUND, lh, dh, gh),
     )
 
 

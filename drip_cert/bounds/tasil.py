@@ -40,10 +40,21 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+from flint import arb, ctx
 from scipy.stats import beta as beta_dist
 
 from drip_cert.errors import SpecError
 from drip_cert.provenance import Check, How, json_float
+from drip_cert.rounding import (
+    add_up,
+    arb_hi,
+    down_np,
+    mul_up,
+    norm2_up_np,
+    spectral_norm_upper,
+    up,
+    up_np,
+)
 
 __all__ = [
     "ASSUMPTIONS",
@@ -78,8 +89,22 @@ FORMS = ("held_out", "threshold", "expectation", "drip_shaped")
 _SOURCE = "math/tasil.md section 3 (this project's construction)"
 
 _EPS = float(np.finfo(np.float64).eps)
-# relative upward pad of computed bounds (covers the few roundings in each closed form)
-_REL_PAD = 8.0 * _EPS
+# Relative upward pad of the closed forms that :func:`_up` rounds (a pad that stays, with its
+# proof). Each closed form it is applied to (parametric_epsilon, parametric_expectation, rho_tasil,
+# the gap bounds 2 gamma0 h0 and gamma0 eps*, the cone peaks of _sound_sup) is a sum of
+# NON-NEGATIVE terms (no cancellation) built with at most 15 correctly rounded operations (each
+# relative error <= u = EPS/2) and at most 3 library logarithms log / log1p (each within
+# LIBM_ULPS = 8 EPS of drip_cert.rounding); a relative error e of the argument of log(y), y >= 2,
+# or of log1p(x) gives a relative error <= e / log 2 of the result (log(1+x) >= x/(1+x)), so the
+# total relative error is below 15 u + 3 (8 + 1.5) EPS < 36 EPS; 64 EPS leaves a margin of 1.7.
+# (eps_star and clopper_pearson_upper do not use it: they are bounded by directed rounding and
+# verified in Arb respectively.)
+_REL_PAD = 64.0 * _EPS
+# Clopper-Pearson: first relative step above scipy's inverse, and how many tenfold steps to try
+# before falling back to the trivial bound 1 (scipy's ppf is accurate to ~1e-12 relative)
+_CP_STEP0 = 1e-12
+_CP_TRIES = 12
+_CP_PREC = 128  # bits of the Arb evaluation: balls far narrower than the 1e-12 steps
 # relative allowance when checking grid values against the claimed Lipschitz-in-time rate
 _CONSISTENCY_RTOL = 1e-9
 # size of the geometric grid tau_j in {b_j 2^{-k/2}: k = 0..K-1} used when tau is data-chosen
@@ -87,10 +112,11 @@ _TAU_GRID_SIZE = 64
 
 
 def _up(x: float) -> float:
-    """``x`` rounded outward (upward), for bounds computed in floating point."""
+    """``x (1 + _REL_PAD)`` rounded up: an upper bound of the exact closed form whose float
+    evaluation is ``x`` (see ``_REL_PAD`` for the proof)."""
     if not math.isfinite(x) or x == 0.0:
         return x  # inf stays inf; an exact zero (h0 = 0) stays exactly zero
-    return math.nextafter(x + abs(x) * _REL_PAD, math.inf)
+    return add_up(x, mul_up(abs(x), _REL_PAD))
 
 
 def _pos(name: str, value: float, *, allow_zero: bool = False, allow_inf: bool = False) -> float:
@@ -122,8 +148,8 @@ class TrajectoryH:
     Attributes
     ----------
     h0, h1
-        The sups used by the lemma: grid maxima in discrete time (:attr:`How.EXACT`), sound sups
-        over the continuous time interval otherwise (:attr:`How.SOUND`).
+        The sups used by the lemma: grid maxima of rounded-up norms in discrete time, sound sups
+        over the continuous time interval otherwise (both :attr:`How.SOUND`).
     h0_grid, h1_grid
         The maxima over the grid points.
     t_h0, t_h1
@@ -150,9 +176,9 @@ def _norms(delta, jac) -> tuple[np.ndarray, np.ndarray]:
     d = np.asarray(delta, dtype=np.float64)
     j = np.asarray(jac, dtype=np.float64)
     if d.ndim == 2:
-        d = np.linalg.norm(d, axis=1) * (1.0 + 4 * _EPS * d.shape[1])
+        d = norm2_up_np(d, axis=1)  # rigorous upper bounds (drip_cert.rounding)
     if j.ndim == 3:
-        j = np.linalg.norm(j, ord=2, axis=(1, 2)) * (1.0 + 1e-12)
+        j = np.asarray(spectral_norm_upper(j), dtype=np.float64).reshape(j.shape[0])
     if d.ndim != 1 or j.ndim != 1 or d.shape != j.shape or d.size == 0:
         raise SpecError(
             "delta must be (N,) norms or (N, m) vectors and jac (N,) norms or (N, m, n) matrices "
@@ -179,7 +205,7 @@ def h_discrete(delta, jac) -> TrajectoryH:
     d, j = _norms(delta, jac)
     i0, i1 = int(np.argmax(d)), int(np.argmax(j))
     return TrajectoryH(
-        float(d[i0]), float(j[i1]), float(d[i0]), float(j[i1]), i0, i1, False, How.EXACT
+        float(d[i0]), float(j[i1]), float(d[i0]), float(j[i1]), i0, i1, False, How.SOUND
     )
 
 
@@ -297,13 +323,21 @@ def eps_star(h0, h1, gamma0, L_Delta):
     """
     h0 = np.asarray(h0, dtype=np.float64)
     h1 = np.asarray(h1, dtype=np.float64)
-    b = gamma0 * h1
-    one_b = 1.0 - b
-    disc = one_b * one_b - 2.0 * L_Delta * gamma0 * gamma0 * h0
-    ok = (one_b > 0) & (disc >= 0)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        e = 2.0 * h0 / (one_b + np.sqrt(np.where(ok, disc, 0.0)))
-    e = np.where(ok, e * (1.0 + _REL_PAD), np.inf)
+    g = np.asarray(gamma0, dtype=np.float64)
+    L = np.asarray(L_Delta, dtype=np.float64)
+    # interval evaluation in the safe direction (every input >= 0): b up, 1 - b down, the
+    # discriminant down, the denominator down, the quotient up; a relative pad would not do,
+    # because 1 - b and the discriminant cancel
+    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+        b_up = up_np(g * h1)
+        one_b = down_np(1.0 - b_up)
+        q_up = up_np(up_np(up_np(2.0 * L) * up_np(g * g)) * h0)
+        disc = down_np(down_np(one_b * one_b) - q_up)
+        ok = (one_b > 0) & (disc >= 0)
+        den = down_np(one_b + down_np(np.sqrt(np.where(ok, disc, 0.0))))
+        e = up_np(2.0 * h0 / den)
+    e = np.where(ok & (den > 0), e, np.inf)
+    e = np.where(h0 == 0.0, np.where(ok, 0.0, np.inf), e)
     return e if e.ndim else float(e)
 
 
@@ -445,7 +479,28 @@ def clopper_pearson_upper(k: int, n: int, delta: float) -> float:
     delta = _delta_ok(delta)
     if k == n:
         return 1.0
-    return min(1.0, _up(float(beta_dist.ppf(1.0 - delta, k + 1, n - k))))
+    # scipy's numerical inverse gives a candidate; the bound is the smallest float p (searched
+    # upward from it) at which Arb proves I_p(k + 1, n - k) >= 1 - delta: the regularized
+    # incomplete beta is the Beta(k + 1, n - k) CDF, increasing in p, so every such p is >= the
+    # exact Clopper-Pearson bound
+    old_prec = ctx.prec
+    ctx.prec = _CP_PREC
+    try:
+        if k == 0:  # closed form 1 - delta^(1/n), enclosed in Arb
+            return min(1.0, arb_hi(1 - arb(delta) ** (arb(1) / n)))
+        target = 1 - arb(delta)
+        p = up(float(beta_dist.ppf(1.0 - delta, k + 1, n - k)))
+        step = _CP_STEP0
+        for _ in range(_CP_TRIES):
+            if p >= 1.0:
+                return 1.0
+            if arb(p).beta_lower(k + 1, n - k, regularized=True) >= target:
+                return p
+            p = up(p * (1.0 + step))
+            step *= 10.0
+        return 1.0
+    finally:
+        ctx.prec = old_prec
 
 
 @dataclass(frozen=True)

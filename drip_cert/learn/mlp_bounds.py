@@ -20,30 +20,61 @@ gelu     [-0.12893, 1.12893]       1.12893               sqrt(2/pi) ~ 0.79788
 identity [1, 1]                    1                     0
 ======== ======================== ====================== ============================
 
-Floating-point soundness: spectral norms are inflated by a relative ``_NORM_INFLATE`` (covering
-the backward error of the SVD); interval enclosures round outward (``np.nextafter`` after a
-relative pad of ``_REL_PAD`` covering the few-ulp error of numpy's ``tanh`` and scipy's ``erf``),
-and interval matrix products add the ``gamma_n = n u / (1 - n u)`` dot-product error bound,
-doubled. This assumes the libm ``tanh``/``erf`` are accurate to a few ulps (true of glibc and
-cephes); it is not an arb-level proof.
+Floating-point soundness (:mod:`drip_cert.rounding` owns the rules): the activation constants are
+evaluated in Arb; spectral norms are rigorous upper bounds
+(:func:`~drip_cert.rounding.spectral_norm_upper`), every product and sum of the Lipschitz
+recursions is rounded up, and the LipSDP certificate is re-checked with a rigorous upper bound of
+the largest eigenvalue of the LMI matrix (its float assembly error bounded entrywise). The
+interval enclosures use directed rounding for every arithmetic operation and the
+cancellation-free forms ``tanh' = sech^2 = 4 e^{-2|z|} / (1 + e^{-2|z|})^2`` and
+``GELU = z Phi(z)``, ``GELU' = Phi(z) + z phi(z)`` with ``Phi`` from ``ndtr`` (``erfc`` in the
+left tail) -- never ``1 - tanh^2`` or ``1 + erf``, which cancel to 0 for large ``|z|`` (then the
+exact value lies outside any relative pad). They evaluate ``exp``, ``tanh`` and ``ndtr`` in
+float (vectorised over boxes and neurons) and widen each result by the documented error budget of
+those library functions (:data:`~drip_cert.rounding.LIBM_REL`,
+:func:`~drip_cert.rounding.ndtr_rel_budget`, checked against mpmath in ``tests/test_rounding.py``):
+sound as long as numpy and scipy meet their documented accuracy.
 """
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.special import erf, ndtr
+from flint import arb
+from scipy.special import ndtr
 
 from drip_cert.errors import SpecError
 from drip_cert.learn.mlp import MLP, activation_fn
 from drip_cert.provenance import Check, How, Quantity
+from drip_cert.rounding import (
+    LIBM_REL,
+    add_up,
+    add_up_np,
+    arb_bounds,
+    arb_hi,
+    arb_lo,
+    down_np,
+    gamma,
+    mul_up,
+    ndtr_rel_budget,
+    norm2_up_np,
+    spectral_norm_upper,
+    sqrt_up,
+    sub_down_np,
+    sym_lambda_max_upper,
+    up_np,
+    widen_np,
+)
 
 __all__ = [
     "ActivationBounds",
     "LipSDPResult",
     "activation_bounds",
+    "enclose_activation",
+    "enclose_activation_prime",
     "enclose_jacobian",
     "enclose_output",
     "jacobian_lipschitz_bound",
@@ -54,20 +85,62 @@ __all__ = [
 ]
 
 _EPS = float(np.finfo(np.float64).eps)
-_UNIT_ROUNDOFF = _EPS / 2.0
-# relative inflation of computed spectral norms: SVD backward error is O(n eps ||W||); 1e-12 covers
-# n up to ~4e3 with a wide safety factor
-_NORM_INFLATE = 1e-12
-# relative outward pad of elementwise results (tanh/erf are accurate to a few ulps; 16 eps is ample)
-_REL_PAD = 16.0 * _EPS
-# absolute outward pad (results near 0 have tiny ulps; this dominates denormal effects)
-_ABS_PAD = 1e-300
+_TINY = 2.0**-1074  # smallest subnormal: the absolute unit of underflow errors
 # LMI size up to which "auto" uses Clarabel (interior point, ~1 s or less there)
 _CLARABEL_MAX_DIM = 48
+# LipSDP: the Schur-complement rho is raised by this much (relative, and absolute times the scale of
+# the output weights) before the rigorous re-check, so that the check has room; NOT a soundness pad
+# (the rigorous re-check alone decides whether the certificate holds)
+_RHO_MARGIN_REL = 1e-7
+_RHO_MARGIN_ABS = 1e-12
 _SQRT2 = math.sqrt(2.0)
-_INV_SQRT_2PI = 1.0 / math.sqrt(2.0 * math.pi)
+_INV_SQRT_2PI = 1.0 / math.sqrt(2.0 * math.pi)  # float, for point evaluations (estimates) only
 
 
+# --------------------------------------------------------------------------- Arb constants
+
+
+def _arb_Phi(z: arb) -> arb:
+    """Normal CDF in Arb, ``erfc(-z / sqrt 2) / 2`` (no cancellation in the left tail)."""
+    return (-z / arb(2).sqrt()).erfc() / 2
+
+
+def _arb_phi(z: arb) -> arb:
+    """Normal density in Arb."""
+    return (-z * z / 2).exp() / (2 * arb.pi()).sqrt()
+
+
+def _arb_gelu_prime(z: arb) -> arb:
+    return _arb_Phi(z) + z * _arb_phi(z)
+
+
+@functools.cache
+def _consts() -> dict[str, float | tuple[float, float]]:
+    """Rigorous float bounds of the constants the enclosures need (computed once, in Arb)."""
+    sqrt2 = arb(2).sqrt()
+    out: dict[str, float | tuple[float, float]] = {
+        "sqrt2": arb_bounds(sqrt2),
+        "inv_sqrt_2pi": arb_bounds(1 / (2 * arb.pi()).sqrt()),
+        # GELU' = Phi + z phi has its global max at +sqrt 2 and global min at -sqrt 2
+        "gelu_prime_max": arb_hi(_arb_gelu_prime(sqrt2)),
+        "gelu_prime_min": arb_lo(_arb_gelu_prime(-sqrt2)),
+    }
+    # the minimiser z* of GELU (the zero of GELU'): a float estimate, then a bracket [a, b] whose
+    # signs are verified in Arb; GELU' < 0 on (-inf, z*) and > 0 on (z*, inf) (see
+    # activation_bounds), so z* in [a, b], and for z in [a, b] (all < 0)
+    # z Phi(z) >= a Phi(z) >= a Phi(b): a rigorous lower bound of min GELU
+    from scipy.optimize import brentq
+
+    zs = float(brentq(lambda z: float(_gelu_prime(z)), -1.0, -0.5, xtol=1e-15))
+    a, b = zs - 1e-12, zs + 1e-12
+    if not (arb_hi(_arb_gelu_prime(arb(a))) < 0.0 < arb_lo(_arb_gelu_prime(arb(b)))):
+        raise ArithmeticError("could not bracket the minimiser of GELU")  # pragma: no cover
+    out["gelu_argmin_bracket"] = (a, b)
+    out["gelu_min_lo"] = arb_lo(arb(a) * _arb_Phi(arb(b)))
+    return out
+
+
+# --------------------------------------------------------------------------- activations
 # --------------------------------------------------------------------------- activations
 
 
@@ -95,32 +168,16 @@ class ActivationBounds:
 
 
 def _gelu_prime(z):
-    """GELU'(z) = Phi(z) + z phi(z) for the exact (erf) GELU."""
+    """GELU'(z) = Phi(z) + z phi(z) for the exact (erf) GELU (float; a point value, not a bound)."""
     z = np.asarray(z, dtype=np.float64)
     return ndtr(z) + z * _INV_SQRT_2PI * np.exp(-0.5 * z * z)
 
 
 def _tanh_prime(z):
-    t = np.tanh(np.asarray(z, dtype=np.float64))
-    return 1.0 - t * t
-
-
-def _up(x, steps: int = 1):
-    """``x`` moved outward (upward) by a relative pad and ``steps`` ulps."""
-    x = np.asarray(x, dtype=np.float64)
-    y = x + np.abs(x) * _REL_PAD + _ABS_PAD
-    for _ in range(steps):
-        y = np.nextafter(y, np.inf)
-    return y
-
-
-def _down(x, steps: int = 1):
-    """``x`` moved outward (downward) by a relative pad and ``steps`` ulps."""
-    x = np.asarray(x, dtype=np.float64)
-    y = x - np.abs(x) * _REL_PAD - _ABS_PAD
-    for _ in range(steps):
-        y = np.nextafter(y, -np.inf)
-    return y
+    """tanh'(z) = sech^2 z = 4 e^{-2|z|} / (1 + e^{-2|z|})^2 (float; a point value). Unlike
+    ``1 - tanh(z)^2`` it keeps full relative accuracy for large ``|z|``."""
+    e = np.exp(-2.0 * np.abs(np.asarray(z, dtype=np.float64)))
+    return 4.0 * e / ((1.0 + e) * (1.0 + e))
 
 
 def activation_bounds(name: str | None) -> ActivationBounds:
@@ -134,19 +191,27 @@ def activation_bounds(name: str | None) -> ActivationBounds:
       ``inf GELU' = GELU'(-sqrt 2) ~ -0.12893`` (limits 1 and 0 at infinity);
       ``GELU''' = phi z (z^2 - 4)`` vanishes at ``0, +-2``, ``|GELU''(0)| = 2 phi(0) = sqrt(2/pi)``
       and ``|GELU''(+-2)| = 2 phi(2) ~ 0.108``, so ``sup |GELU''| = sqrt(2/pi) ~ 0.79788``.
+      ``GELU'`` decreases from 0 to ``GELU'(-sqrt 2) < 0``, increases to ``GELU'(sqrt 2) > 0``
+      and decreases to 1: it is negative before its single zero ``z* ~ -0.7518`` and positive
+      after, so ``GELU`` decreases up to ``z*`` and increases after it.
     * identity: slope 1, curvature 0.
 
-    Every value is rounded outward.
+    Every value is evaluated in Arb and rounded outward.
     """
-    if name is None or name == "identity":
+    return _activation_bounds(None if name == "identity" else name)
+
+
+@functools.cache
+def _activation_bounds(name: str | None) -> ActivationBounds:
+    if name is None:
         return ActivationBounds("identity", 1.0, 1.0, 1.0, 0.0)
     if name == "tanh":
-        curv = 4.0 / (3.0 * math.sqrt(3.0))
-        return ActivationBounds("tanh", 0.0, 1.0, 1.0, float(_up(curv)))
+        curv = arb_hi(arb(4) / (3 * arb(3).sqrt()))
+        return ActivationBounds("tanh", 0.0, 1.0, 1.0, curv)
     if name == "gelu":
-        hi = float(_up(_gelu_prime(_SQRT2)))
-        lo = float(_down(_gelu_prime(-_SQRT2)))
-        curv = float(_up(2.0 * _INV_SQRT_2PI))
+        c = _consts()
+        hi, lo = float(c["gelu_prime_max"]), float(c["gelu_prime_min"])
+        curv = arb_hi((2 / arb.pi()).sqrt())
         return ActivationBounds("gelu", lo, hi, max(hi, abs(lo)), curv)
     raise SpecError(
         f"activation {name!r} has no regularity bounds; use 'tanh', 'gelu' or 'identity'",
@@ -162,13 +227,13 @@ def _layer_activations(mlp: MLP) -> list[ActivationBounds]:
 
 
 def _spec_norm(w: np.ndarray) -> float:
-    """Spectral norm, inflated to cover the SVD rounding error."""
-    return float(np.linalg.norm(w, 2)) * (1.0 + _NORM_INFLATE)
+    """Rigorous upper bound of ``||W||_2`` (:func:`~drip_cert.rounding.spectral_norm_upper`)."""
+    return float(spectral_norm_upper(w))
 
 
 def _row_norm(w: np.ndarray) -> float:
-    """``||W||_{2 -> inf}`` = the largest row 2-norm, inflated."""
-    return float(np.max(np.linalg.norm(w, axis=1))) * (1.0 + _NORM_INFLATE)
+    """``||W||_{2 -> inf}`` = the largest row 2-norm, rounded up."""
+    return float(np.max(norm2_up_np(w, axis=1)))
 
 
 # --------------------------------------------------------------------------- Lipschitz bounds
@@ -186,10 +251,10 @@ def lipschitz_product(mlp: MLP) -> Quantity:
     """
     value = 1.0
     for w, act in zip(mlp.weights, _layer_activations(mlp)):
-        value *= act.abs_slope * _spec_norm(w)
+        value = mul_up(value, mul_up(act.abs_slope, _spec_norm(w)))
     return Quantity(
         "L_pi",
-        float(_up(value)),
+        value,
         How.SOUND,
         "DRIP Assumption PolicyRegularity (a)",
         f"product of spectral norms times sup|s'| ({mlp.activation}), global on R^n",
@@ -207,8 +272,9 @@ class LipSDPResult:
     status
         cvxpy status string (``"optimal"`` is the only accepted one).
     check
-        The numpy re-check: ``lhs`` = largest eigenvalue of the LMI matrix with the returned
-        multipliers, ``rhs`` = ``-`` the rounding allowance; holds when strictly below.
+        The rigorous re-check: ``lhs`` = an upper bound (outward rounded) of the largest
+        eigenvalue of the LMI matrix with the returned multipliers, ``rhs = 0``; holds when
+        strictly below.
     product
         The product bound, always available as the fallback.
     """
@@ -248,6 +314,23 @@ def _lipsdp_matrix(mlp: MLP, lam: np.ndarray, rho: float) -> np.ndarray:
     ``[da; ds]^T [[-2 alpha beta l, (alpha+beta) l], [(alpha+beta) l, -2 l]] [da; ds] >= 0``, so
     ``M = [A;B]^T Q(lam) [A;B] + diag(-rho I, 0, W_{L-1}^T W_{L-1})``.
     """
+    return _lipsdp_matrix_and_error(mlp, lam, rho)[0]
+
+
+def _lipsdp_matrix_and_error(
+    mlp: MLP, lam: np.ndarray, rho: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """The float ``M(lam, rho)`` of :func:`_lipsdp_matrix` and an entrywise bound of its distance
+    to the exact ``M`` for the same float ``lam``, ``rho`` and slope bounds.
+
+    Every entry of ``M`` is a sum of at most ``N + k + 8`` rounded operations on the terms of the
+    non-negative magnitude ``2|a b| |A|^T T |A| + |a + b| (|A|^T T |B| + |B|^T T |A|) +
+    2 |B|^T T |B| + rho E_0 + |W_{L-1}|^T |W_{L-1}|`` (``N`` hidden neurons, ``k`` inputs of the
+    last layer: the products with the diagonal ``T`` and the scalar factors, the dot products,
+    the four matrix sums and the symmetrisation), so its error is at most ``gamma_{N+k+8}`` times
+    that magnitude (Higham Thm 3.1, any order), plus underflow; twice the float magnitude covers
+    the magnitude's own rounding.
+    """
     A, B = _lipsdp_blocks(mlp)
     n0 = mlp.in_dim
     act = activation_bounds(mlp.activation)
@@ -258,7 +341,18 @@ def _lipsdp_matrix(mlp: MLP, lam: np.ndarray, rho: float) -> np.ndarray:
     last = mlp.weights[-1]
     k = last.shape[1]
     M[-k:, -k:] += last.T @ last
-    return 0.5 * (M + M.T)
+    M = 0.5 * (M + M.T)
+    aA, aB = np.abs(A), np.abs(B)
+    mag = (
+        2.0 * abs(a * b) * aA.T @ T @ aA
+        + abs(a + b) * (aA.T @ T @ aB + aB.T @ T @ aA)
+        + 2.0 * aB.T @ T @ aB
+    )
+    mag[:n0, :n0] += abs(rho) * np.eye(n0)
+    mag[-k:, -k:] += np.abs(last).T @ np.abs(last)
+    N = A.shape[0]
+    err = add_up_np(up_np(2.0 * gamma(N + k + 8) * mag), (N + k + 8) * 8 * _TINY)
+    return M, err
 
 
 def lipschitz_lipsdp(
@@ -275,8 +369,9 @@ def lipschitz_lipsdp(
     Re-check (the certificate never rests on the solver's float): with the returned multipliers
     clipped to ``>= 0``, split ``M(lam, 0) = [[P, Q], [Q^T, S]]`` (input block ``P``); ``M <= 0``
     iff ``S < 0`` and ``rho >= lambda_max(P - Q S^{-1} Q^T)`` (Schur complement). The smallest
-    such ``rho``, inflated by ``1e-7`` relative, is then verified by a full numpy ``eigvalsh`` of
-    ``M``: its largest eigenvalue must be below ``-`` a rounding allowance ``10 d eps ||M||_F``.
+    such ``rho``, raised by ``1e-7`` relative, is then verified rigorously: ``M`` is assembled in
+    float with an entrywise bound of its rounding error and
+    :func:`~drip_cert.rounding.sym_lambda_max_upper` must prove ``lambda_max(M) < 0``.
     Any non-``optimal`` status, solver exception or failed re-check gives ``value=None``; callers
     fall back to the product bound. An output activation multiplies the bound by its ``sup|s'|``.
 
@@ -296,7 +391,7 @@ def lipschitz_lipsdp(
     product = lipschitz_product(mlp).value
     if len(mlp.weights) < 2:
         # affine map: the product bound is the exact spectral norm (times output slope)
-        chk = Check("lipsdp.recheck", False, "no hidden layer: LipSDP not applicable")
+        chk = Check.derive("lipsdp.recheck", False, "no hidden layer: LipSDP not applicable")
         return LipSDPResult(None, "not_applicable", chk, product)
     if solver not in ("auto", "CLARABEL", "SCS"):
         raise SpecError(
@@ -309,7 +404,7 @@ def lipschitz_lipsdp(
     if solver == "auto":
         solver = "CLARABEL" if d <= _CLARABEL_MAX_DIM else "SCS"
     if d > max_dim:
-        chk = Check(
+        chk = Check.derive(
             "lipsdp.recheck",
             False,
             f"LMI size {d} exceeds max_dim={max_dim}; raise max_dim or use solver='SCS'",
@@ -339,35 +434,33 @@ def lipschitz_lipsdp(
     try:
         prob.solve(solver=getattr(cp, solver))
     except (cp.error.SolverError, ValueError, ArithmeticError) as exc:  # pragma: no cover
-        chk = Check("lipsdp.recheck", False, f"solver raised {type(exc).__name__}: {exc}")
+        chk = Check.derive("lipsdp.recheck", False, f"solver raised {type(exc).__name__}: {exc}")
         return LipSDPResult(None, "solver_error", chk, product)
     status = str(prob.status)
     if status != cp.OPTIMAL or rho.value is None or lam.value is None:
-        chk = Check("lipsdp.recheck", False, f"status {status!r} is not 'optimal'")
+        chk = Check.derive("lipsdp.recheck", False, f"status {status!r} is not 'optimal'")
         return LipSDPResult(None, status, chk, product)
     lam_v = np.maximum(np.asarray(lam.value, dtype=np.float64), 0.0)
     rho_v = _schur_rho(mlp, lam_v)
     if rho_v is None:
-        chk = Check("lipsdp.recheck", False, "hidden block S of M is not negative definite")
+        chk = Check.derive("lipsdp.recheck", False, "hidden block S of M is not negative definite")
         return LipSDPResult(None, status, chk, product)
-    rho_v = rho_v * (1.0 + 1e-7) + 1e-12 * scale
-    Mn = _lipsdp_matrix(mlp, lam_v, rho_v)
-    top = float(np.max(np.linalg.eigvalsh(Mn)))
-    allowance = 10.0 * d * _EPS * float(np.linalg.norm(Mn, "fro"))
-    holds = top < -allowance
+    rho_v = rho_v * (1.0 + _RHO_MARGIN_REL) + _RHO_MARGIN_ABS * scale
+    Mn, err = _lipsdp_matrix_and_error(mlp, lam_v, rho_v)
+    top = float(sym_lambda_max_upper(Mn, err))
     out_slope = activation_bounds(mlp.output_activation).abs_slope
-    value = float(_up(math.sqrt(rho_v) * out_slope)) if holds else None
-    chk = Check(
+    chk = Check.compare(
         "lipsdp.recheck",
-        holds,
-        f"numpy lambda_max(M) = {top:.3e} must be < -{allowance:.3e} (rounding allowance); "
-        f"solver rho {float(rho.value):.6g}, certified rho {rho_v:.6g}",
-        lhs=top,
-        rhs=-allowance,
-        margin=-allowance - top,
+        top,
+        0.0,
+        f"rigorous upper bound of lambda_max(M) = {top:.3e} must be < 0 (M assembled in float "
+        f"with entrywise error bounds, eigenvalue bounded with outward rounding); solver rho "
+        f"{float(rho.value):.6g}, certified rho {rho_v:.6g}",
+        strict=True,
+        method=How.SOUND,
         source="Fazlyab et al. 2019, LipSDP-Neuron",
-        how=How.SOUND,
     )
+    value = mul_up(sqrt_up(rho_v), out_slope) if chk.holds else None
     return LipSDPResult(value, status, chk, product)
 
 
@@ -430,11 +523,13 @@ def jacobian_lipschitz_bound(mlp: MLP) -> Quantity:
     P, Q = 1.0, 0.0
     for w, act in zip(mlp.weights, _layer_activations(mlp)):
         nw = _spec_norm(w)
-        Q = act.abs_curv * _row_norm(w) * nw * P * P + act.abs_slope * nw * Q
-        P = act.abs_slope * nw * P
+        # every factor is >= 0, so rounding each product and sum up bounds the recursion
+        curv_term = mul_up(mul_up(mul_up(act.abs_curv, _row_norm(w)), nw), mul_up(P, P))
+        Q = add_up(curv_term, mul_up(mul_up(act.abs_slope, nw), Q))
+        P = mul_up(mul_up(act.abs_slope, nw), P)
     return Quantity(
         "L_dpi",
-        float(_up(Q)),
+        Q,
         How.SOUND,
         "DRIP Assumption PolicyRegularity (b)",
         "layerwise product rule: Q' = sup|s''| ||W||_2->inf ||W|| P^2 + sup|s'| ||W|| Q",
@@ -468,73 +563,162 @@ def _act_prime(name: str | None, a: np.ndarray) -> np.ndarray:
 # --------------------------------------------------------------------------- interval enclosures
 
 
-def _gamma(n: int) -> float:
-    """``gamma_n = n u / (1 - n u)``: relative error bound of an n-term dot product."""
-    nu = n * _UNIT_ROUNDOFF
-    return nu / (1.0 - nu)
-
-
 def _mid_rad(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Centre and radius with ``[m - r, m + r] ⊇ [lo, hi]`` in exact arithmetic."""
+    """Centre and radius with ``[m - r, m + r] ⊇ [lo, hi]`` in exact arithmetic (each difference
+    is one rounding, moved up)."""
     m = lo + 0.5 * (hi - lo)
-    r = np.nextafter(np.maximum(hi - m, m - lo), np.inf)
-    r = np.nextafter(r, np.inf)
+    r = up_np(np.maximum(hi - m, m - lo))
     return m, r
 
 
 def _affine(w: np.ndarray, b: np.ndarray, lo: np.ndarray, hi: np.ndarray):
-    """Sound enclosure of ``W z + b`` for ``z`` in the box ``[lo, hi]`` (batched, ``(..., in)``)."""
+    """Sound enclosure of ``W z + b`` for ``z`` in the box ``[lo, hi]`` (batched, ``(..., in)``).
+
+    ``W z + b = (W m + b) + W (z - m)`` with ``|W (z - m)| <= |W| r``. The float ``c = W m + b``
+    and ``rad = |W| r`` are within ``gamma_{k+1} (|W| |m| + |b|)`` and ``gamma_k |W| r`` of the
+    exact values (Higham Thm 3.1, any summation order); ``2 gamma_{k+2}`` times the float
+    ``(|m| + r) |W|^T + |b|`` covers both (and its own rounding). The two final sums are rounded
+    outward one at a time.
+    """
     m, r = _mid_rad(lo, hi)
     c = m @ w.T + b
     aw = np.abs(w)
     rad = r @ aw.T
-    err = 2.0 * _gamma(w.shape[1] + 2) * ((np.abs(m) + r) @ aw.T + np.abs(b))
-    return _down(c - rad - err), _up(c + rad + err)
+    k = w.shape[1]
+    err = add_up_np(
+        up_np(2.0 * gamma(k + 2) * ((np.abs(m) + r) @ aw.T + np.abs(b))), (k + 2) * 8 * _TINY
+    )
+    return sub_down_np(sub_down_np(c, rad), err), add_up_np(add_up_np(c, rad), err)
 
 
-def _gelu_argmin() -> float:
-    """The minimiser of GELU (root of GELU' = Phi(z) + z phi(z), about -0.7518)."""
-    from scipy.optimize import brentq
-
-    return float(brentq(lambda z: float(_gelu_prime(z)), -1.0, -0.5, xtol=1e-15))
+# ---- activations and their derivatives, pointwise enclosures (vectorised)
 
 
-def _act_interval(name: str | None, lo: np.ndarray, hi: np.ndarray):
-    """Sound enclosure of the activation over ``[lo, hi]`` (elementwise)."""
+def _exp_bounds(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Enclosure of ``exp(x)`` at float points ``x`` (numpy ``exp`` widened by ``LIBM_REL``)."""
+    lo, hi = widen_np(np.exp(x), LIBM_REL)
+    return np.maximum(lo, 0.0), hi
+
+
+def _Phi_bounds(z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Enclosure of the normal CDF ``Phi(z)`` (scipy ``ndtr``: ``erfc`` in the tails, no
+    cancellation) widened by its error budget :func:`~drip_cert.rounding.ndtr_rel_budget`."""
+    lo, hi = widen_np(ndtr(z), ndtr_rel_budget(z))
+    return np.clip(lo, 0.0, 1.0), np.clip(hi, 0.0, 1.0)
+
+
+def _phi_bounds(z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Enclosure of the normal density ``exp(-z^2/2) / sqrt(2 pi)``: ``z^2/2`` rounded both
+    ways, ``exp`` decreasing in it, ``1/sqrt(2 pi)`` from Arb."""
+    c_lo, c_hi = _consts()["inv_sqrt_2pi"]
+    zz = z * z
+    h_lo = down_np(0.5 * down_np(zz))
+    h_hi = up_np(0.5 * up_np(zz))
+    e_lo, _ = _exp_bounds(-h_hi)
+    _, e_hi = _exp_bounds(-h_lo)
+    return down_np(e_lo * c_lo), up_np(e_hi * c_hi)
+
+
+def _scale_point(z: np.ndarray, lo: np.ndarray, hi: np.ndarray):
+    """Enclosure of ``z * v`` for float points ``z`` and ``v`` in ``[lo, hi]``."""
+    pos = z >= 0
+    return (
+        down_np(np.where(pos, z * lo, z * hi)),
+        up_np(np.where(pos, z * hi, z * lo)),
+    )
+
+
+def _gelu_point(z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Enclosure of ``GELU(z) = z Phi(z)`` at float points (never ``1 + erf``)."""
+    return _scale_point(z, *_Phi_bounds(z))
+
+
+def _gelu_prime_point(z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Enclosure of ``GELU'(z) = Phi(z) + z phi(z)`` at float points."""
+    p_lo, p_hi = _Phi_bounds(z)
+    q_lo, q_hi = _scale_point(z, *_phi_bounds(z))
+    return down_np(p_lo + q_lo), up_np(p_hi + q_hi)
+
+
+def _sech2_bounds(a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Enclosure of ``tanh'(a) = sech^2(a) = 4 e / (1 + e)^2``, ``e = exp(-2a)``, for ``a >= 0``.
+
+    ``2a`` is exact, ``e`` is enclosed in ``[0, 1]``, and ``4e / (1 + e)^2`` increases with ``e``
+    there, so the ends come from the ends of ``e`` with every operation rounded outward. No
+    cancellation: the relative accuracy is that of ``exp`` for every ``a`` (``1 - tanh^2`` is 0
+    in float for ``a > 19``, where ``sech^2 a > 1e-17``).
+    """
+    e_lo, e_hi = _exp_bounds(-2.0 * a)
+    e_lo, e_hi = np.clip(e_lo, 0.0, 1.0), np.clip(e_hi, 0.0, 1.0)
+    d_hi = up_np(1.0 + e_lo)
+    d_lo = down_np(1.0 + e_hi)
+    lo = down_np(4.0 * e_lo / up_np(d_hi * d_hi))
+    hi = up_np(4.0 * e_hi / down_np(d_lo * d_lo))
+    return np.clip(lo, 0.0, 1.0), np.clip(hi, 0.0, 1.0)
+
+
+def enclose_activation(name: str | None, lo, hi) -> tuple[np.ndarray, np.ndarray]:
+    """Sound enclosure of the activation ``s`` over ``[lo, hi]`` (elementwise, any shape).
+
+    tanh is increasing (numpy ``tanh`` at the ends, widened by its error budget); GELU
+    ``z Phi(z)`` decreases up to its minimiser ``z* ~ -0.7518`` and increases after it: over an
+    interval on one side the ends give the range, otherwise the range is from a rigorous lower
+    bound of ``min GELU`` (Arb) to the larger end value.
+    """
+    lo = np.asarray(lo, dtype=np.float64)
+    hi = np.asarray(hi, dtype=np.float64)
     if name is None or name == "identity":
         return lo, hi
-    f = activation_fn(name, np)
-    flo, fhi = f(lo), f(hi)
     if name == "tanh":
-        return _down(flo), _up(fhi)
-    # GELU: decreasing on (-inf, z*], increasing on [z*, inf)
-    zs = _gelu_argmin()
-    gmin = 0.5 * zs * (1.0 + erf(zs / _SQRT2))
-    ymin = np.where(hi <= zs, fhi, np.where(lo >= zs, flo, gmin))
-    ymax = np.maximum(flo, fhi)
-    # a wrong z* by dz changes gmin by O(dz^2): 1e-14 absolute slack covers xtol=1e-15
-    return _down(ymin) - 1e-14 * (lo < zs) * (hi > zs), _up(ymax)
+        ylo, _ = widen_np(np.tanh(lo), LIBM_REL)
+        _, yhi = widen_np(np.tanh(hi), LIBM_REL)
+        return np.clip(ylo, -1.0, 1.0), np.clip(yhi, -1.0, 1.0)
+    if name == "gelu":
+        c = _consts()
+        a, b = c["gelu_argmin_bracket"]
+        l_lo, l_hi = _gelu_point(lo)
+        h_lo, h_hi = _gelu_point(hi)
+        left = hi <= a  # [lo, hi] inside (-inf, z*]: decreasing
+        right = lo >= b  # inside [z*, inf): increasing
+        ylo = np.where(left, h_lo, np.where(right, l_lo, c["gelu_min_lo"]))
+        yhi = np.where(left, l_hi, np.where(right, h_hi, np.maximum(l_hi, h_hi)))
+        return ylo, yhi
+    raise SpecError(f"activation {name!r} is not supported", field="activation")
 
 
-def _act_prime_interval(name: str | None, lo: np.ndarray, hi: np.ndarray):
-    """Sound enclosure of ``s'`` over ``[lo, hi]`` (elementwise)."""
+def enclose_activation_prime(name: str | None, lo, hi) -> tuple[np.ndarray, np.ndarray]:
+    """Sound enclosure of the derivative ``s'`` over ``[lo, hi]`` (elementwise, any shape).
+
+    tanh: ``sech^2`` is even and decreasing in ``|z|``: its range is
+    ``[sech^2(max |z|), sech^2(min |z|)]`` (:func:`_sech2_bounds`). GELU: ``GELU'`` decreases on
+    ``(-inf, -sqrt 2]``, increases on ``[-sqrt 2, sqrt 2]`` and decreases after, so its minimum over
+    an interval is at an end unless the interval contains ``-sqrt 2`` (then the global minimum
+    ``GELU'(-sqrt 2)``, Arb), and likewise the maximum with ``+sqrt 2``.
+    """
+    lo = np.asarray(lo, dtype=np.float64)
+    hi = np.asarray(hi, dtype=np.float64)
     if name is None or name == "identity":
         return np.ones_like(lo), np.ones_like(hi)
     if name == "tanh":
-        # tanh' is even, increasing on (-inf, 0], decreasing on [0, inf)
-        plo, phi = _tanh_prime(lo), _tanh_prime(hi)
-        dmin = np.minimum(plo, phi)
-        dmax = np.where((lo <= 0.0) & (hi >= 0.0), 1.0, np.maximum(plo, phi))
-        return np.maximum(_down(dmin), 0.0), np.minimum(_up(dmax), 1.0)
+        a_max = np.maximum(np.abs(lo), np.abs(hi))
+        a_min = np.where((lo <= 0.0) & (hi >= 0.0), 0.0, np.minimum(np.abs(lo), np.abs(hi)))
+        return _sech2_bounds(a_max)[0], _sech2_bounds(a_min)[1]
     if name == "gelu":
-        # GELU' decreases on (-inf, -sqrt2], increases on [-sqrt2, sqrt2], decreases after
-        plo, phi = _gelu_prime(lo), _gelu_prime(hi)
-        gmin = _gelu_prime(-_SQRT2)
-        gmax = _gelu_prime(_SQRT2)
-        dmin = np.where((lo <= -_SQRT2) & (hi >= -_SQRT2), gmin, np.minimum(plo, phi))
-        dmax = np.where((lo <= _SQRT2) & (hi >= _SQRT2), gmax, np.maximum(plo, phi))
-        return _down(dmin), _up(dmax)
+        c = _consts()
+        s_lo, s_hi = c["sqrt2"]
+        l_lo, l_hi = _gelu_prime_point(lo)
+        h_lo, h_hi = _gelu_prime_point(hi)
+        # may contain -sqrt2 / +sqrt2 (conservative: the global extreme is always a valid bound)
+        has_min = (lo <= -s_lo) & (hi >= -s_hi)
+        has_max = (lo <= s_hi) & (hi >= s_lo)
+        dlo = np.where(has_min, c["gelu_prime_min"], np.minimum(l_lo, h_lo))
+        dhi = np.where(has_max, c["gelu_prime_max"], np.maximum(l_hi, h_hi))
+        return dlo, dhi
     raise SpecError(f"activation {name!r} is not supported", field="activation")
+
+
+_act_interval = enclose_activation
+_act_prime_interval = enclose_activation_prime
 
 
 def _check_box(mlp: MLP, lo, hi) -> tuple[np.ndarray, np.ndarray]:
@@ -574,22 +758,24 @@ def enclose_output(mlp: MLP, lo, hi) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _interval_matmul_point_left(w: np.ndarray, jlo: np.ndarray, jhi: np.ndarray):
-    """Enclosure of ``W J`` for a point matrix ``W`` and an interval matrix ``J`` (batched)."""
+    """Enclosure of ``W J`` for a point matrix ``W`` and an interval matrix ``J`` (batched); the
+    rounding terms as in :func:`_affine`."""
     m, r = _mid_rad(jlo, jhi)
     c = w @ m
     aw = np.abs(w)
     rad = aw @ r
-    err = 2.0 * _gamma(w.shape[1] + 2) * (aw @ (np.abs(m) + r))
-    return _down(c - rad - err), _up(c + rad + err)
+    k = w.shape[1]
+    err = add_up_np(up_np(2.0 * gamma(k + 2) * (aw @ (np.abs(m) + r))), (k + 2) * 8 * _TINY)
+    return sub_down_np(sub_down_np(c, rad), err), add_up_np(add_up_np(c, rad), err)
 
 
 def _interval_scale_rows(dlo, dhi, mlo, mhi):
     """Enclosure of ``diag(d) M`` for interval ``d`` (``(..., k)``) and interval ``M``
-    (``(..., k, n)``)."""
+    (``(..., k, n)``): the four end products, each one rounding, moved outward."""
     dlo = dlo[..., :, None]
     dhi = dhi[..., :, None]
     p = np.stack([dlo * mlo, dlo * mhi, dhi * mlo, dhi * mhi])
-    return _down(p.min(axis=0)), _up(p.max(axis=0))
+    return down_np(p.min(axis=0)), up_np(p.max(axis=0))
 
 
 def enclose_jacobian(mlp: MLP, lo, hi) -> tuple[np.ndarray, np.ndarray]:
