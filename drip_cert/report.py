@@ -24,8 +24,26 @@ def certificate_markdown(cert: Any) -> str:
     d = cert.to_dict()
     s = d["system"]
     lines = [f"# drip-cert certificate: {s['name']}", ""]
-    verdict = "CERTIFIED" if d["certified"] else "NOT CERTIFIED"
+    verdict = {
+        "certified": "CERTIFIED",
+        "conditional": "CONDITIONAL",
+        "not_certified": "NOT CERTIFIED",
+    }[d["verdict"]]
     lines.append(f"**{verdict}** (n = {s['n']}, m = {s['m']}, d = {s['d']}, T = {s['horizon']:g})")
+    lines.append("")
+    if d["verdict"] == "certified":
+        lines.append(
+            "Every check holds, every input is exact, sound or given"
+            + (f" (given: {', '.join(d['given_constants'])})" if d["given_constants"] else "")
+            + ", and every region-limited result is used only where a proof covers it."
+        )
+    else:
+        lines.append("What the verdict rests on:")
+        lines.append("")
+        lines.extend(f"* {r}" for r in d["verdict_reasons"])
+    if d.get("parts"):
+        lines.append("")
+        lines.append("Parts: " + "; ".join(f"{k}: {v['verdict']}" for k, v in d["parts"].items()))
     if d["estimated_constants"]:
         lines.append("")
         lines.append(
@@ -37,12 +55,16 @@ def certificate_markdown(cert: Any) -> str:
         "",
         "## Assumptions",
         "",
-        "| id | holds | margin | how | detail |",
-        "|---|---|---|---|---|",
+        "| id | status | margin | how | scope | detail |",
+        "|---|---|---|---|---|---|",
     ]
     for a in d["assumptions"]:
+        scope = a["scope"] + (
+            "" if a["scope_justified"] else f" (**not justified**: {a['scope_reason']})"
+        )
         lines.append(
-            f"| {a['id']} | {_f(a['holds'])} | {_f(a['margin'])} | {a['how']} | {a['detail']} |"
+            f"| {a['id']} | {a['status']} | {_f(a['margin'])} | {a['how']} | {scope} | "
+            f"{a['detail']} |"
         )
     lines += [
         "",
@@ -113,33 +135,92 @@ def l1_design_text(rep: dict[str, Any]) -> str:
         f"rho_r = {_f(rep.get('rho_r'))}, rho_a = {_f(rep.get('rho_a'))}, rho = "
         f"{_f(rep.get('rho'))}, kappa = {_f(rep.get('kappa'))}",
         "",
-        "| eq | lhs | rhs | margin | holds |",
-        "|---|---|---|---|---|",
+        "| eq | lhs | rhs | margin (float) | verified margin (Arb, lower end) | verified |",
+        "|---|---|---|---|---|---|",
     ]
     for c in rep.get("conditions", []):
         lines.append(
             f"| ({c['eq']}) | {_f(c['lhs'])} | {_f(c['rhs'])} | {_f(c['margin'])} | "
-            f"{_f(c['holds'])} |"
+            f"{_f(c.get('margin_lo'))} | {_f(c.get('verified', c['holds']))} |"
         )
+    if rep.get("backoff"):
+        lines += [
+            "",
+            "backed off from the boundary until every margin is verified in Arb: "
+            + ", ".join(f"{k} x {v:.10g}" for k, v in rep["backoff"].items())
+            + " (T_s is divided by its factor)",
+        ]
     if rep.get("reason"):
         lines += ["", f"reason: {rep['reason']}"]
     return "\n".join(lines)
 
 
-def validation_text(rep: dict[str, Any]) -> str:
-    """Text rendering of a validation report."""
+def _validation_table(checks: list[dict[str, Any]]) -> list[str]:
     lines = [
-        f"validation: {'HOLDS' if rep.get('holds') else 'VIOLATED'}"
-        + ("" if rep.get("at_certified_parameters", True) else " (NOT at certified parameters)"),
-        "",
-        "| check | bound | empirical | ci_high | ratio | holds |",
-        "|---|---|---|---|---|---|",
+        "| check | kind | bound | empirical | confidence bound | ratio bound/empirical | status |",
+        "|---|---|---|---|---|---|---|",
     ]
-    for c in rep.get("checks", []):
+    for c in checks:
+        status = c.get("status", "holds" if c.get("holds") else "violated")
         lines.append(
-            f"| {c['name']} | {_f(c['bound'])} | {_f(c['empirical'])} | "
-            f"{_f(c['ci_high'])} | {_f(c['ratio'])} | {_f(c['holds'])} |"
+            f"| {c['name']} | {c.get('kind', '')} | {_f(c.get('bound'))} | "
+            f"{_f(c.get('empirical'))} | {_f(c.get('confidence_low'))} | "
+            f"{_f(c.get('ratio'))} | {status.upper() if status == 'violated' else status} |"
         )
+    lines.append("")
+    for c in checks:
+        what = f"* {c['name']}: {c.get('what', '')}"
+        if c.get("kind") == "radius" and c.get("exceed_count") is not None:
+            what += (
+                f"; {c['exceed_count']} of {c['n']} paths above rho (frequency "
+                f"{_f(c['exceed_frequency'], 4)}, one-sided Clopper-Pearson lower bound "
+                f"{_f(c['exceed_confidence_low'], 4)} vs delta {_f(c['delta'], 4)})"
+            )
+        elif c.get("kind") == "tail" and c.get("threshold") is not None:
+            what += f"; threshold {_f(c['threshold'])}"
+        if c.get("time") is not None:
+            what += f"; worst recorded t = {_f(c['time'], 4)}"
+        if c.get("reason"):
+            what += f"; NOT CHECKED: {c['reason']}"
+        lines.append(what)
+    return lines
+
+
+def validation_text(rep: dict[str, Any]) -> str:
+    """Text rendering of a validation report: status first, then every check.
+
+    Each check row shows the certified bound, the empirical statistic, the one-sided lower
+    confidence bound that decides ``violated``, the ratio bound / empirical and the status; the
+    lines below the table say what each check compares and why a check was not checked.
+    """
+    status = rep.get("status") or ("holds" if rep.get("holds") else "violated")
+    label = {"holds": "HOLDS", "violated": "VIOLATED", "nothing_checked": "NOTHING CHECKED"}
+    counts = rep.get("counts") or {}
+    head = f"validation: {label.get(status, status.upper())}"
+    if counts:
+        head += (
+            f" ({counts.get('holds', 0)} hold, {counts.get('violated', 0)} violated, "
+            f"{counts.get('not_checked', 0)} not checked)"
+        )
+    if not rep.get("at_certified_parameters", True):
+        head += " (L1 runs NOT at certified parameters)"
+    lines = [head, ""]
+    levels = {c.get("level") for c in rep.get("checks", []) if c.get("level") is not None}
+    if levels:
+        lines += [
+            "confidence bound: one-sided lower bound of the empirical statistic at level "
+            + ", ".join(_f(v, 4) for v in sorted(levels))
+            + " (per-time checks: for all recorded times at once); a check is violated when it "
+            "exceeds the bound",
+            "",
+        ]
+    lines += _validation_table(rep.get("checks", []))
+    short = rep.get("short_horizon_at_certified_parameters")
+    if short:
+        lines += ["", f"{short.get('note', 'short horizon')} ({short.get('paths')} paths):", ""]
+        lines += _validation_table(short.get("checks", []))
+    if rep.get("notes"):
+        lines.append("")
     for note in rep.get("notes", []):
         lines.append(f"* {note}")
     return "\n".join(lines)
@@ -247,10 +328,9 @@ def reproduce_figure(
         )
     title = "Total imitation gap E||X_t - x*_t|| (band: 95% t interval)"
     if name:
-        verdict = (
-            "certified"
-            if cert.certified
-            else "not certified: " + ", ".join(c.id for c in cert.assumptions if not c.holds)
+        failing = [c.id for c in cert.assumptions if not c.holds]
+        verdict = cert.verdict.value.replace("_", " ") + (
+            ": " + ", ".join(failing) + " fail" if failing else ""
         )
         title = f"{name} ({verdict})\n" + title
     if not at_certified:
@@ -275,6 +355,12 @@ def reproduce_figure(
 def reproduce_markdown(summary: dict[str, Any], cert: Any, runs: dict[str, Any]) -> str:
     """``report.md`` of ``drip-cert reproduce paper-4d``."""
     lines = ['# DRIP paper, Section "Numerical Experiments", reproduced by drip-cert', ""]
+    lines.append(
+        f"**Certificate: {cert.verdict.value.replace('_', ' ').upper()}**; validation of the "
+        + ", ".join(f"{k} ensemble: {v}" for k, v in summary["validation_status"].items())
+        + ". The verdict's reasons are listed under Certificate below."
+    )
+    lines.append("")
     st = summary["settings"]
     lines.append(
         f"Settings: {'quick' if summary['quick'] else 'full'} run, horizon "

@@ -84,7 +84,7 @@ def test_certify_markdown(capsys):
     code, out, _ = run(capsys, "certify", "examples/unmatched_2d/unmatched_2d.toml")
     assert code == 0
     assert out.startswith("# drip-cert certificate: unmatched-2d")
-    assert "| DRIP-A2 | yes |" in out
+    assert "| DRIP-A2 | holds |" in out
 
 
 def test_design_l1_calculator(capsys):

@@ -3,8 +3,10 @@ Assumptions 1, 4, 6, 7).
 
 Each constant is a :class:`~drip_cert.provenance.Quantity` that records how it was obtained:
 
-* input operator ``g``: for a constant ``g`` every constant is exact (closed form up to
-  rounding); for a time-varying ``g`` the sup over ``t in [0, T]`` is a sampled estimate;
+* input operator ``g``: for a constant ``g`` every constant is exact (closed form, outward
+  rounded); for a time-varying ``g`` the sup over ``t in [0, T]`` is a rigorous interval bound
+  over :data:`TIME_PIECES` pieces of ``[0, T]`` (sound, scope ``t in [0, T]``); the unmatched
+  parts use the projector ``P_perp(t) = I - g(t) Theta_ad(t)``, a closed form in ``t``;
 * ``Theta_ad = [I_m 0] gbar^{-1}``: with ``g_perp`` an orthonormal basis of ``ker g^T`` this is
   the pseudo-inverse ``(g^T g)^{-1} g^T`` (the matched part does not depend on the choice of
   ``g_perp``), computed symbolically;
@@ -58,17 +60,41 @@ def g_perp_at(s: System, t: float = 0.0) -> np.ndarray:
     return u[:, s.m :]
 
 
+def perp_projector_symbolic(s: System) -> sp.ImmutableMatrix:
+    """``P_perp(t) = I - g(t) Theta_ad(t) = g_perp(t) g_perp(t)^T``, the orthogonal projector
+    onto ``ker g(t)^T``.
+
+    For orthonormal ``g_perp``, ``||g_perp^T v|| = ||P_perp v||`` and
+    ``||g_perp^T M||_F = ||P_perp M||_F`` (``P_perp^T P_perp = P_perp``), so every growth and
+    regularity constant of the unmatched part ``g_perp^T Lambda`` (L1-DRAC (7)) equals that of
+    ``P_perp Lambda``, which is a closed form in ``t`` even when ``g`` varies with time (no basis
+    has to be chosen at each ``t``).
+    """
+    g = sp.Matrix(s.g)
+    return sp.ImmutableMatrix(sp.eye(s.n) - g * sp.Matrix(theta_ad_symbolic(s)))
+
+
+#: pieces of [0, T] over which a time-varying g is enclosed (interval bounds of sup over t)
+TIME_PIECES = 256
+
+
 @dataclass(frozen=True)
 class InputConstants:
-    """Constants of the input operator (DRIP Assumption 1, L1-DRAC Assumption 1)."""
+    """Constants of the input operator (DRIP Assumption 1, L1-DRAC Assumption 1).
+
+    Every bound is rigorous: entries of ``g(t)``, ``g'(t)`` and ``Theta_ad(t)`` are enclosed by
+    outward-rounded interval arithmetic (over pieces of ``[0, T]`` when they depend on ``t``), the
+    norms bounded with Arb (:func:`~drip_cert.analysis.lognorm.mu2_interval_upper`).
+    """
 
     Delta_g: Quantity  #: sup_t ||g(t)||_F (the paper's)
     Delta_g_spectral: Quantity  #: sup_t ||g(t)||_2 (tighter; used by the comparison bound)
     Delta_g_dot: Quantity  #: sup_t ||g'(t)||_F
     Delta_g_perp: Quantity  #: ||g_perp||_F = sqrt(n - m) for orthonormal g_perp
     Delta_Theta: Quantity  #: sup_t ||Theta_ad(t)||_F
-    rank: int
-    min_singular_value: float
+    Theta_spectral: Quantity  #: sup_t ||Theta_ad(t)||_2
+    rank: Quantity  #: rank of g(t) proved for every t (m when the smallest singular value > 0)
+    min_singular_value: Quantity  #: a lower bound of inf_t sigma_min(g(t))
     g_perp: tuple[tuple[float, ...], ...]  #: at t = 0
     theta_ad: tuple[tuple[float, ...], ...]  #: at t = 0
 
@@ -84,60 +110,136 @@ class InputConstants:
     def to_dict(self) -> dict[str, Any]:
         return {
             **{q.name: q.to_dict() for q in self.quantities()},
-            "rank": self.rank,
-            "min_singular_value": self.min_singular_value,
+            "Theta_spectral": self.Theta_spectral.to_dict(),
+            "rank": int(self.rank.value),
+            "min_singular_value": self.min_singular_value.value,
             "g_perp": [list(r) for r in self.g_perp],
             "theta_ad": [list(r) for r in self.theta_ad],
         }
 
 
-def input_constants(s: System) -> InputConstants:
-    """Compute :class:`InputConstants`.
+def _time_pieces(s: System, mats) -> list[tuple[float, float]]:
+    if not any(e.has(s.t) for M in mats for e in M):
+        return [(0.0, 0.0)]
+    edges = np.linspace(0.0, float(s.horizon), TIME_PIECES + 1)
+    return [(float(a), float(b)) for a, b in zip(edges[:-1], edges[1:], strict=True)]
 
-    Exact for a constant ``g``; for a time-varying ``g`` the suprema over ``[0, T]`` are taken
-    on a grid of 4097 points and labelled ``estimate``.
+
+def _enclose_t(M: sp.MatrixBase, t: sp.Symbol, piece: tuple[float, float]):
+    """Entry-wise rigorous enclosure ``(lo, hi)`` of a matrix of ``t`` over ``piece``."""
+    from drip_cert.analysis.interval import enclose_expr
+
+    lo = np.empty(M.shape)
+    hi = np.empty(M.shape)
+    for i in range(M.shape[0]):
+        for j in range(M.shape[1]):
+            lo[i, j], hi[i, j] = enclose_expr(M[i, j], [t], [piece])
+    return lo, hi
+
+
+def _fro_up(lo: np.ndarray, hi: np.ndarray) -> float:
+    """Upper bound of ``||M||_F`` over the interval matrix (outward rounded)."""
+    from drip_cert.rounding import sqrt_up, sum_sq_up
+
+    return sqrt_up(sum_sq_up(np.maximum(np.abs(lo), np.abs(hi)).ravel()))
+
+
+def _spectral_up(lo: np.ndarray, hi: np.ndarray) -> float:
+    """Upper bound of ``||M||_2`` over the interval matrix: ``lambda_max`` of the symmetric
+    dilation ``[[0, M], [M^T, 0]]`` (its eigenvalues are ``+-sigma_i`` and zeros)."""
+    from drip_cert.analysis.lognorm import mu2_interval_upper
+
+    r, c = lo.shape
+    Lo = np.zeros((r + c, r + c))
+    Hi = np.zeros((r + c, r + c))
+    Lo[:r, r:], Hi[:r, r:] = lo, hi
+    Lo[r:, :r], Hi[r:, :r] = lo.T, hi.T
+    return max(0.0, float(mu2_interval_upper(Lo, Hi)))
+
+
+def _sigma_min_down(lo: np.ndarray, hi: np.ndarray) -> float:
+    """Lower bound of ``sigma_min(M)`` (M tall, n x m) over the interval matrix:
+    ``sqrt(lambda_min(M^T M))``, ``M^T M`` enclosed by interval products and
+    ``lambda_min(S) = -lambda_max(-S) >= -mu2_upper(-S)``."""
+    from drip_cert.analysis.interval import _add, _mul
+    from drip_cert.analysis.lognorm import mu2_interval_upper
+    from drip_cert.rounding import sqrt_down
+
+    n, m = lo.shape
+    Glo = np.empty((m, m))
+    Ghi = np.empty((m, m))
+    for a in range(m):
+        for b in range(m):
+            acc = (0.0, 0.0)
+            for k in range(n):
+                acc = _add(acc, _mul((lo[k, a], hi[k, a]), (lo[k, b], hi[k, b])))
+            Glo[a, b], Ghi[a, b] = acc
+    lam_min = -float(mu2_interval_upper(-Ghi, -Glo))
+    return sqrt_down(lam_min) if lam_min > 0 else 0.0
+
+
+def input_constants(s: System) -> InputConstants:
+    """Compute :class:`InputConstants` with rigorous bounds.
+
+    For a constant ``g`` the entries are enclosed once (exact closed forms, outward rounded:
+    ``how = exact``); for a time-varying ``g`` the suprema over ``[0, T]`` are interval bounds over
+    :data:`TIME_PIECES` pieces (``how = sound``, scope ``t in [0, T]``).
     """
-    th = theta_ad_symbolic(s)
-    gdot = sp.Matrix(s.g).diff(s.t)
-    times = s.rank_check_times() if s.g_is_constant else np.linspace(0.0, s.horizon, 4097)
-    how = How.EXACT if s.g_is_constant else How.ESTIMATE
-    scope = "constant g" if s.g_is_constant else f"sup over a 4097-point grid of [0, {s.horizon}]"
-    fro, spec, dot, tnorm, smin = 0.0, 0.0, 0.0, 0.0, math.inf
-    for tt in times:
-        G = s.g_at(tt)
-        sv = np.linalg.svd(G, compute_uv=False)
-        fro = max(fro, float(np.linalg.norm(G, "fro")))
-        spec = max(spec, float(sv[0]))
-        smin = min(smin, float(sv[-1]))
-        D = np.array(gdot.subs(s.t, tt).evalf(), dtype=float)
-        dot = max(dot, float(np.linalg.norm(D, "fro")))
-        TH = np.array(th.subs(s.t, tt).evalf(), dtype=float)
-        tnorm = max(tnorm, float(np.linalg.norm(TH, "fro")))
+    from drip_cert.provenance import Scope
+    from drip_cert.rounding import sqrt_up
+
+    g = sp.Matrix(s.g)
+    th = sp.Matrix(theta_ad_symbolic(s))
+    gdot = g.diff(s.t)
+    pieces = _time_pieces(s, [g])
+    const = s.g_is_constant
+    method = How.EXACT if const else How.SOUND
+    scope = Scope(None, None if const else (0.0, float(s.horizon)))
+    text = (
+        "constant g" if const else f"interval bound over {len(pieces)} pieces of [0, {s.horizon}]"
+    )
+    fro = spec = dot = tfro = tspec = 0.0
+    smin = math.inf
+    for piece in pieces:
+        lo, hi = _enclose_t(g, s.t, piece)
+        fro = max(fro, _fro_up(lo, hi))
+        # both are upper bounds of ||g||_2 (||.||_2 <= ||.||_F): keep the smaller
+        spec = max(spec, min(_spectral_up(lo, hi), _fro_up(lo, hi)))
+        smin = min(smin, _sigma_min_down(lo, hi))
+        if not const:
+            dlo, dhi = _enclose_t(gdot, s.t, piece)
+            dot = max(dot, _fro_up(dlo, dhi))
+        tlo, thi = _enclose_t(th, s.t, piece)
+        tfro = max(tfro, _fro_up(tlo, thi))
+        tspec = max(tspec, _spectral_up(tlo, thi))
     n, m = s.n, s.m
     gp = g_perp_at(s, 0.0)
     th0 = np.array(th.subs(s.t, 0.0).evalf(), dtype=float)
+
+    def q(name: str, value: float, source: str, note: str = text) -> Quantity:
+        return Quantity.derive(name, value, method=method, source=source, note=note, scope=scope)
+
     return InputConstants(
-        Delta_g=Quantity("Delta_g", fro, how, "DRIP Assumption 1 (Frobenius)", scope),
-        Delta_g_spectral=Quantity(
-            "Delta_g_spectral", spec, how, "spectral-norm bound of g (this project)", scope
-        ),
-        Delta_g_dot=Quantity("Delta_g_dot", dot, how, "L1-DRAC Assumption 1", scope),
-        Delta_g_perp=Quantity(
+        Delta_g=q("Delta_g", fro, "DRIP Assumption 1 (Frobenius)"),
+        Delta_g_spectral=q("Delta_g_spectral", spec, "spectral-norm bound of g (this project)"),
+        Delta_g_dot=q("Delta_g_dot", dot, "L1-DRAC Assumption 1"),
+        Delta_g_perp=Quantity.derive(
             "Delta_g_perp",
-            math.sqrt(n - m),
-            How.EXACT,
-            "L1-DRAC Assumption 1",
-            "orthonormal g_perp: ||g_perp||_F = sqrt(n - m)",
+            sqrt_up(float(n - m)),
+            source="L1-DRAC Assumption 1",
+            note="orthonormal g_perp: ||g_perp||_F = sqrt(n - m)",
         ),
-        Delta_Theta=Quantity(
-            "Delta_Theta",
-            tnorm,
-            how,
-            "L1-DRAC Assumption 1",
-            "Theta_ad = (g^T g)^{-1} g^T; " + scope,
+        Delta_Theta=q(
+            "Delta_Theta", tfro, "L1-DRAC Assumption 1", "Theta_ad = (g^T g)^{-1} g^T; " + text
         ),
-        rank=int(m if smin > 0 else 0),
-        min_singular_value=smin,
+        Theta_spectral=q("Theta_spectral", tspec, "L1-DRAC Assumption 1 (spectral norm)"),
+        rank=q(
+            "rank_g",
+            float(m if smin > 0 else 0),
+            "DRIP Assumption 1",
+            f"sigma_min(g(t)) >= {smin:.6g} for every t ({text})",
+        ),
+        min_singular_value=q("sigma_min_g", smin, "DRIP Assumption 1"),
         g_perp=tuple(tuple(float(v) for v in row) for row in gp),
         theta_ad=tuple(tuple(float(v) for v in row) for row in th0),
     )
@@ -253,18 +355,23 @@ def uncertainty_constants(
     """
     given = dict(given or {})
     n, m = s.n, s.m
-    times = np.array([0.0]) if not _depends_on_t(s) else np.linspace(0.0, s.horizon, 9)
+    times = np.array([0.0]) if not _depends_on_t(s) else np.array([0.0, float(s.horizon)])
     th = theta_ad_symbolic(s)
-    gp = g_perp_at(s, 0.0)
+    pperp = perp_projector_symbolic(s)
+    ic = input_constants(s)
     out: dict[str, Quantity] = {}
 
-    def put(name: str, value: float, how: How, source: str, nt: str) -> None:
+    def put(name: str, value: float, how: How, source: str, nt: str, scope=None) -> None:
         if name in given:
             out[name] = Quantity(
                 name, _given_float(given[name], name), How.GIVEN, source, "given in [constants]"
             )
         else:
-            out[name] = Quantity(name, value, how, source, nt)
+            out[name] = Quantity.derive(
+                name, value, method=how, source=source, note=nt, scope=scope
+            )
+
+    hat_src = "L1-DRAC Assumptions 1, 5, 6 (time-Lipschitz constant)"
 
     parts: dict[str, tuple[sp.MatrixBase | None, float, float | None]] = {
         "mu": (s.lambda_mu, 1.0, s.Delta_mu),
@@ -286,43 +393,56 @@ def uncertainty_constants(
         if mat is None:
             if given_bound is not None and key != "p":
                 # only the bound is known: matched/unmatched parts bounded through the norms of
-                # Theta_ad and g_perp^T (||Theta Lambda|| <= ||Theta||_2 ||Lambda||)
-                thn = float(np.linalg.norm(np.array(th.subs(s.t, 0.0).evalf(), dtype=float), 2))
-                put(f"Delta_{key}", given_bound, How.GIVEN, growth_src, "given in [uncertainty]")
-                put(
-                    f"Delta_{key}_par",
-                    thn * given_bound,
-                    How.SOUND,
-                    growth_src + " / (7)",
-                    "||Theta_ad||_2 * Delta (only the bound is known)",
+                # Theta_ad and g_perp^T (||Theta Lambda|| <= sup_t ||Theta(t)||_2 ||Lambda||)
+                from drip_cert.rounding import mul_up
+
+                gb = Quantity(
+                    f"Delta_{key}", given_bound, How.GIVEN, growth_src, "given in [uncertainty]"
                 )
+                put(gb.name, gb.value, gb.how, growth_src, gb.note)
+                par = Quantity.derive(
+                    f"Delta_{key}_par",
+                    mul_up(ic.Theta_spectral.value, given_bound),
+                    inputs=[ic.Theta_spectral, gb],
+                    note="sup_t ||Theta_ad(t)||_2 * Delta (only the bound is known)",
+                )
+                put(par.name, par.value, par.how, growth_src + " / (7)", par.note)
                 put(
                     f"Delta_{key}_perp",
                     given_bound if n > m else 0.0,
-                    How.SOUND,
+                    gb.how,
                     growth_src + " / (7)",
                     "||g_perp^T||_2 = 1 times Delta",
                 )
                 for sub in ("", "_par", "_perp"):
-                    if f"L_{key}{sub}" in given:
-                        put(f"L_{key}{sub}", 0.0, How.GIVEN, lip_src, "")
-                    else:
-                        out[f"L_{key}{sub}"] = Quantity(
-                            f"L_{key}{sub}",
-                            math.nan,
-                            How.ESTIMATE,
-                            lip_src,
-                            "unknown: only Delta is given; give it in [constants]",
-                        )
+                    for nm in (f"L_{key}{sub}", f"L_{key}{sub}_hat"):
+                        if nm in given:
+                            put(nm, 0.0, How.GIVEN, lip_src, "")
+                        else:
+                            out[nm] = Quantity(
+                                nm,
+                                math.nan,
+                                How.ESTIMATE,
+                                lip_src,
+                                "unknown: only Delta is given; give it in [constants]",
+                            )
                 continue
             for sub in ("", "_par", "_perp"):
                 put(f"Delta_{key}{sub}", 0.0, How.EXACT, growth_src, "no such term")
                 put(f"L_{key}{sub}", 0.0, How.EXACT, lip_src, "no such term")
+                put(f"L_{key}{sub}_hat", 0.0, How.EXACT, hat_src, "no such term")
             continue
         full = sp.Matrix(mat)
         par = sp.Matrix(th) * full
-        perp = sp.Matrix(gp.T) * full if n > m else None
-        from drip_cert.analysis.growth import growth_bound, holder_half_bound, lipschitz_bound
+        # the unmatched part g_perp^T Lambda has the norms of P_perp Lambda (see
+        # perp_projector_symbolic): a closed form in t also for a time-varying g
+        perp = sp.Matrix(pperp) * full if n > m else None
+        from drip_cert.analysis.growth import (
+            growth_bound,
+            holder_half_bound,
+            lipschitz_bound,
+            sup_bound,
+        )
 
         t_sym = s.t if len(times) > 1 else None
         t_rng = (0.0, float(s.horizon)) if len(times) > 1 else (0.0, 0.0)
@@ -336,13 +456,22 @@ def uncertainty_constants(
                     "m = n: no unmatched part",
                 )
                 put(f"L_{key}{sub}", 0.0, How.EXACT, lip_src, "m = n: no unmatched part")
+                put(f"L_{key}{sub}_hat", 0.0, How.EXACT, hat_src, "m = n: no unmatched part")
                 continue
             ev = batch_fn(s, expr) if s.blocks else None
             src = growth_src + (" / (7)" if sub else "")
             D = growth_bound(
                 expr, s.states, t_sym, t_rng, power, f"Delta_{key}{sub}", source=src, evaluate=ev
             )
-            put(D.name, D.value, D.how, src, D.note)
+            put(D.name, D.value, D.how, src, D.note, D.scope)
+            # time-Lipschitz constant: sup_{t, a} ||d/dt (.)|| (mean-value theorem in t); the
+            # matched/unmatched parts depend on t through g(t) too
+            dt_expr = expr.diff(s.t)
+            if t_sym is None or all(e == 0 for e in dt_expr):
+                put(f"L_{key}{sub}_hat", 0.0, How.EXACT, hat_src, "independent of t")
+            else:
+                H = sup_bound(dt_expr, s.states, t_sym, t_rng, f"L_{key}{sub}_hat", source=hat_src)
+                put(H.name, H.value, H.how, hat_src, "sup_{t,a} ||d/dt||: " + H.note, H.scope)
             if lip_exp == 1.0:
                 L = lipschitz_bound(
                     expr, s.states, t_sym, t_rng, f"L_{key}{sub}", source=lip_src, evaluate=ev
@@ -351,7 +480,7 @@ def uncertainty_constants(
                 L = holder_half_bound(
                     expr, s.states, t_sym, t_rng, f"L_{key}{sub}", source=lip_src, evaluate=ev
                 )
-            put(L.name, L.value, L.how, lip_src, L.note)
+            put(L.name, L.value, L.how, lip_src, L.note, L.scope)
     return UncertaintyConstants(values=out)
 
 

@@ -40,9 +40,9 @@ from drip_cert.analysis.interval import (
     UnsupportedExpression,
     opaque_functions,
 )
-from drip_cert.analysis.lognorm import mu2_interval_upper, mu_2
+from drip_cert.analysis.lognorm import mu2_constant_bounds, mu2_interval_upper, mu_2
 from drip_cert.errors import SolverError, SpecError
-from drip_cert.provenance import How, Quantity, json_float
+from drip_cert.provenance import GLOBAL, How, Quantity, Scope, json_float
 
 __all__ = [
     "ContractionResult",
@@ -109,9 +109,9 @@ class ContractionResult:
         ``ESTIMATE`` (sampled).
     method
         ``'exact-linear'``, ``'interval-bnb'``, ``'sampled'`` or ``'lmi-metric'``.
-    region
-        Where the rate holds: ``'all x, all t'``, or ``'box [...] x t in [...]'`` (weaker than the
-        paper's "for all x").
+    scope
+        Where the rate holds (:class:`~drip_cert.provenance.Scope`): all states and times, or a
+        box and/or a time range (weaker than the paper's "for all x and t").
     max_mu_upper
         Sound upper bound on ``max mu_2(J)`` over the region (NaN for an estimate).
     max_mu_sampled
@@ -131,7 +131,7 @@ class ContractionResult:
     rate: float
     how: How
     method: str
-    region: str
+    scope: Scope
     max_mu_upper: float
     max_mu_sampled: float
     witness: tuple[float, ...] | None
@@ -146,6 +146,11 @@ class ContractionResult:
         return self.rate > 0
 
     @property
+    def region(self) -> str:
+        """Where the rate holds, as text (``"all x, all t"``, ``"box [...], all t"``)."""
+        return self.scope.describe()
+
+    @property
     def gap(self) -> float:
         """``max_mu_upper - max_mu_sampled`` (NaN for an estimate)."""
         return self.max_mu_upper - self.max_mu_sampled
@@ -158,6 +163,7 @@ class ContractionResult:
             self.how,
             _SOURCE,
             f"{self.method} on {self.region}. {self.note}".strip(),
+            self.scope,
         )
 
     def to_dict(self) -> dict[str, Any]:
@@ -167,6 +173,7 @@ class ContractionResult:
             "how": How(self.how).value,
             "method": self.method,
             "region": self.region,
+            "scope": self.scope.to_dict(),
             "max_mu_upper": json_float(self.max_mu_upper),
             "max_mu_sampled": json_float(self.max_mu_sampled),
             "witness": None if self.witness is None else [float(w) for w in self.witness],
@@ -213,13 +220,12 @@ def _check_inputs(J, states, box, t, t_range):
     return n, states, box, t_range
 
 
-def _region(box: np.ndarray | None, t_range, depends_t: bool) -> str:
-    if box is None:
-        return "all x, all t" if not depends_t else f"all x, t in [{t_range[0]}, {t_range[1]}]"
-    xs = f"box {np.asarray(box).tolist()}"
-    if not depends_t:
-        return f"{xs}, all t"
-    return f"{xs} x t in [{t_range[0]}, {t_range[1]}]"
+def _scope(box: np.ndarray | None, t_range, depends_t: bool) -> Scope:
+    """All x unless ``box``; all t unless the Jacobian depends on t (then ``t_range``)."""
+    return Scope(
+        None if box is None else tuple(map(tuple, np.asarray(box, dtype=float))),
+        tuple(t_range) if depends_t else None,
+    )
 
 
 # --------------------------------------------------------------------------------------------
@@ -441,23 +447,28 @@ def contraction_rate(
     depends_t = t is not None and J.has(t)
 
     if not depends_x and not depends_t:
+        # a constant Jacobian: lambda_max of its symmetric part isolated exactly (rational
+        # characteristic polynomial, roots in Arb); float eigvalsh of the rounded matrix can have
+        # the wrong sign when mu_2 is within rounding of 0
         try:
-            A = np.array(J.evalf(), dtype=float)
-        except TypeError as exc:
+            lo_mu, ub = mu2_constant_bounds(sp.Matrix(J))
+        except (TypeError, ValueError) as exc:
             raise SpecError(f"J is constant but not real-valued: {J}", field="J") from exc
-        m = float(mu_2(A))
+        mid = float(lo_mu)
         return ContractionResult(
-            rate=-m,
+            rate=-ub,
             how=How.EXACT,
             method="exact-linear",
-            region="all x, all t",
-            max_mu_upper=m,
-            max_mu_sampled=m,
+            scope=GLOBAL,
+            max_mu_upper=ub,
+            max_mu_sampled=mid,
             witness=None,
             tolerance=0.0,
             n_boxes=0,
             time_s=time.perf_counter() - t0,
-            note="constant Jacobian (linear or affine closed loop): mu_2 = lambda_max(sym J)",
+            note="constant Jacobian (linear or affine closed loop): mu_2 = lambda_max(sym J) "
+            "isolated exactly (rational characteristic polynomial, roots in Arb); the rate is "
+            "the rigorous lower end",
         )
     if method == "exact-linear":
         raise SpecError(
@@ -479,7 +490,7 @@ def contraction_rate(
     sbox = box if box is not None else np.zeros((n, 2))
     full = np.vstack([sbox, [t_range]]) if depends_t else sbox.copy()
     variables = [*states, t] if depends_t else list(states)
-    region = _region(box if depends_x else None, t_range, depends_t)
+    scope = _scope(box if depends_x else None, t_range, depends_t)
     if J_num is None:
         try:
             J_num = jacobian_function(J, states, t)
@@ -519,7 +530,7 @@ def contraction_rate(
             rate=-lb,
             how=How.ESTIMATE,
             method="sampled",
-            region=region,
+            scope=scope,
             max_mu_upper=math.nan,
             max_mu_sampled=lb,
             witness=tuple(float(v) for v in arg),
@@ -552,7 +563,7 @@ def contraction_rate(
         rate=-ub,
         how=How.SOUND,
         method="interval-bnb",
-        region=region,
+        scope=scope,
         max_mu_upper=ub,
         max_mu_sampled=lb,
         witness=tuple(float(v) for v in arg),

@@ -74,6 +74,8 @@ from drip_cert.analysis.constants import (
 )
 from drip_cert.analysis.interval import MatrixEnclosure, UnsupportedExpression, compile_enclosure
 from drip_cert.provenance import How, Quantity
+from drip_cert.rounding import arb_hi as _arb_hi
+from drip_cert.rounding import arb_lo as _arb_lo
 
 __all__ = [
     "growth_bound",
@@ -102,6 +104,44 @@ _INF = math.inf
 
 
 # ------------------------------------------------------------------------------- public API
+def sup_bound(
+    F: sp.MatrixBase,
+    states: Sequence[sp.Symbol],
+    t: sp.Symbol | None = None,
+    t_range: tuple[float, float] = (0.0, 0.0),
+    name: str = "sup",
+    *,
+    source: str = "",
+) -> Quantity:
+    """Rigorous ``sup_{t, a} ||F(t, a)||`` (Euclidean / Frobenius) over all of ``R^n``.
+
+    From whole-space interval enclosures of the entries (the bounded route of
+    :func:`growth_bound`); ``inf`` (sound: no finite bound was proved) when an entry has no finite
+    enclosure, e.g. because it grows with ``a``. Used for the time-Lipschitz constants (the
+    "hats" of L1-DRAC Assumptions 1, 5, 6) as ``sup ||d/dt F||`` (mean-value theorem in ``t``).
+    """
+    ctx = _Context.make(F, states, t, t_range)
+    if ctx.is_zero:
+        return Quantity(name, 0.0, How.EXACT, source, "F = 0")
+    enc = ctx.whole_space_enclosures(ctx.entries)
+    if enc is None:
+        return Quantity(
+            name,
+            _INF,
+            How.SOUND,
+            source,
+            "no finite whole-space enclosure (the term may grow with the state): no finite "
+            "bound; give it in [constants] if you know one" + ctx.time_note(),
+        )
+    return Quantity(
+        name,
+        _sqrt_sum_sq_up([max(-lo, hi) for lo, hi in enc]),
+        How.SOUND,
+        source,
+        "rigorous whole-space entry enclosures" + ctx.time_note(),
+    )
+
+
 def growth_bound(
     F: sp.MatrixBase,
     states: Sequence[sp.Symbol],
@@ -672,16 +712,7 @@ def _wrapped_enclose(node: sp.Expr, args: list[Interval]) -> Interval | None:
 
 
 # ----------------------------------------------------------------------- rigorous scalars
-def _arb_lo(v: arb) -> float:
-    if not v.is_finite():
-        return -_INF
-    return math.nextafter(float(v.lower()), -_INF)
-
-
-def _arb_hi(v: arb) -> float:
-    if not v.is_finite():
-        return _INF
-    return math.nextafter(float(v.upper()), _INF)
+# _arb_lo / _arb_hi: float ends of an Arb ball moved one ulp outward (drip_cert.rounding)
 
 
 def _sub_up(hi: float, lo: float) -> float:

@@ -43,13 +43,14 @@ from drip_cert.analysis.contraction import (
     SamplingOptions,
     _check_inputs,
     _grid,
-    _region,
+    _scope,
     jacobian_function,
 )
 from drip_cert.analysis.interval import EncloseCallback, MatrixEnclosure, UnsupportedExpression
 from drip_cert.analysis.lognorm import lambda_max_upper, mu_2, mu_2_weighted, spectral_abscissa
 from drip_cert.errors import SolverError, SpecError
-from drip_cert.provenance import How, Quantity, json_float
+from drip_cert.provenance import How, Quantity, Scope, json_float
+from drip_cert.rounding import arb_hi
 
 __all__ = [
     "MetricResult",
@@ -101,7 +102,7 @@ class MetricResult:
     P: np.ndarray
     cond_P: float
     how: How
-    region: str
+    scope: Scope
     n_vertices: int
     kappa: float
     bisection_tol: float
@@ -113,6 +114,11 @@ class MetricResult:
         P = np.array(self.P, dtype=float)
         P.setflags(write=False)
         object.__setattr__(self, "P", P)
+
+    @property
+    def region(self) -> str:
+        """Where the metric rate holds, as text."""
+        return self.scope.describe()
 
     @property
     def transient_gain(self) -> float:
@@ -128,6 +134,7 @@ class MetricResult:
             "contraction metric (Bullo, Contraction Theory, Thm 3.9, weighted 2-norm)",
             f"LMI on {self.n_vertices} vertices, {self.region}, cond(P) = {self.cond_P:.4g}; "
             f"Euclidean rate on the same vertices {self.euclidean_rate:.6g}",
+            self.scope,
         )
 
     def to_dict(self) -> dict[str, Any]:
@@ -229,10 +236,6 @@ def _arb_mat(M: np.ndarray) -> arb_mat:
     return arb_mat([[arb(float(M[i, j])) for j in range(n)] for i in range(n)])
 
 
-def _upper(v: arb) -> float:
-    return math.nextafter(float(v.upper()), math.inf) if v.is_finite() else math.inf
-
-
 def verify_metric(As: np.ndarray, P: np.ndarray, lam: float) -> bool:
     """Rigorously check ``P > 0`` and ``A_i^T P + P A_i + 2 lam P <= 0`` for every ``A_i``.
 
@@ -253,7 +256,7 @@ def verify_metric(As: np.ndarray, P: np.ndarray, lam: float) -> bool:
         mid = np.array([[float(M[i, j].mid()) for j in range(n)] for i in range(n)])
         # radius around the *float* midpoint, so that [mid - rad, mid + rad] contains the ball
         rad = np.array(
-            [[_upper(abs(M[i, j] - arb(mid[i, j]))) for j in range(n)] for i in range(n)]
+            [[arb_hi(abs(M[i, j] - arb(mid[i, j]))) for j in range(n)] for i in range(n)]
         )
         if lambda_max_upper(mid, rad) > 0.0:
             return False
@@ -390,7 +393,7 @@ def contraction_metric(
         P=P,
         cond_P=float(w[-1] / w[0]),
         how=how,
-        region=_region(box if depends_x else None, t_range, depends_t),
+        scope=_scope(box if depends_x else None, t_range, depends_t),
         n_vertices=len(As),
         kappa=kappa,
         bisection_tol=tol,

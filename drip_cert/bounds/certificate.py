@@ -25,8 +25,10 @@ from drip_cert.analysis.constants import (
     uncertainty_constants,
 )
 from drip_cert.analysis.contraction import ContractionResult
+from drip_cert.analysis.invariance import InvariantBall, best_invariant_set
 from drip_cert.errors import AssumptionViolation, DripCertError, SpecError
-from drip_cert.provenance import Check, How, Quantity, json_float
+from drip_cert.provenance import Check, How, Quantity, Scope, Verdict, json_float, verdict_of
+from drip_cert.rounding import div_up, mul_up, up
 from drip_cert.system.spec import Spec
 from drip_cert.system.system import System
 
@@ -120,12 +122,12 @@ def analyse_contraction(s: System, which: str, opts: ContractionOptions) -> Cont
     depends_t = J.has(s.t)
     t_range = (0.0, s.horizon) if depends_t else None
     jac = s.numeric.jac_expert if which == "expert" else s.numeric.jac_learned
-    jv = jax.jit(jax.vmap(jac, in_axes=(None, 0)))
+    jv = jax.jit(jax.vmap(jac, in_axes=(0, 0)))
 
     def J_num(tt, X):
-        return np.asarray(
-            jv(jnp.float64(tt if tt is not None else 0.0), jnp.asarray(X, dtype=jnp.float64))
-        )
+        X = jnp.asarray(X, dtype=jnp.float64)
+        tv = jnp.broadcast_to(jnp.asarray(0.0 if tt is None else tt, jnp.float64), X.shape[:1])
+        return np.asarray(jv(tv, X))
 
     enclose = block_enclose_callback(s.blocks) if s.blocks else None
     res = contraction_rate(
@@ -152,9 +154,27 @@ def analyse_contraction(s: System, which: str, opts: ContractionOptions) -> Cont
     return ContractionAnalysis(which, res, metric, err)
 
 
+#: check ids of each part of the certificate (a part's verdict is that of its checks)
+PARTS: dict[str, tuple[str, ...]] = {
+    "contraction": ("DRIP-A1", "DRIP-A2"),
+    "tasil": ("DRIP-A1", "DRIP-A2", "TaSIL"),
+    "l1drac": ("L1DRAC-A2", "L1DRAC-A7", "L1DRAC-design"),
+}
+_SDE_REASON = (
+    "L1-DRAC Assumption 2 is needed for all x: trajectories of the true SDE leave every bounded "
+    "set with positive probability, so a rate proved on {scope} does not suffice"
+)
+
+
 @dataclass(frozen=True)
 class Certificate:
-    """The certificate of one system (frozen). See the module docstring for the JSON keys."""
+    """The certificate of one system (frozen). See the module docstring for the JSON keys.
+
+    The verdict is computed from the checks (:func:`~drip_cert.provenance.verdict_of`):
+    ``certified`` when every check holds, is proved (exact, sound or given) and is used only where
+    its scope is justified; ``conditional`` when every check holds but some rest on estimates or
+    on an unproved region; ``not_certified`` when a check fails or could not be evaluated.
+    """
 
     system: System
     assumptions: tuple[Check, ...]
@@ -167,24 +187,58 @@ class Certificate:
     tasil: Any | None = None  # drip_cert.bounds.tasil.TasilCertificate
     tasil_provenance: Mapping[str, Any] = field(default_factory=dict)
     notes: tuple[str, ...] = ()
+    invariance: InvariantBall | None = None
+    extra_quantities: tuple[Quantity, ...] = ()  #: other inputs of the checks (h0, h1, gamma0)
+
+    @property
+    def verdict(self) -> Verdict:
+        """``certified`` / ``conditional`` / ``not_certified`` (see the class docstring)."""
+        return verdict_of(self.assumptions)[0]
+
+    @property
+    def verdict_reasons(self) -> tuple[str, ...]:
+        """What the verdict rests on when it is not ``certified``."""
+        return verdict_of(self.assumptions)[1]
 
     @property
     def certified(self) -> bool:
-        """Every checked assumption holds (and every requested part is feasible)."""
-        return all(c.holds for c in self.assumptions)
+        """``verdict == certified``: every link proved, every scope justified."""
+        return self.verdict == Verdict.CERTIFIED
+
+    def part_verdicts(self) -> dict[str, dict[str, Any]]:
+        """The verdict of each part (``contraction``, ``tasil``, ``l1drac``) that was checked."""
+        out: dict[str, dict[str, Any]] = {}
+        for part, ids in PARTS.items():
+            cs = [c for c in self.assumptions if c.id in ids]
+            if not any(c.id == ids[-1] for c in cs) and part != "contraction":
+                continue
+            v, why = verdict_of(cs)
+            out[part] = {"verdict": v.value, "reasons": list(why)}
+        return out
 
     @property
     def estimated(self) -> tuple[str, ...]:
-        """Names of constants that are sampled estimates (not bounds) among those used."""
+        """Names of the estimates (not bounds) among the quantities the checks rest on."""
         names = [q.name for q in self.all_quantities() if q.how == How.ESTIMATE]
+        for c in self.assumptions:
+            names.extend(
+                r for r in c.rests_on if r not in names and self._how_of(r) == How.ESTIMATE
+            )
         return tuple(dict.fromkeys(names))
+
+    def _how_of(self, name: str) -> How | None:
+        for q in self.all_quantities():
+            if q.name == name:
+                return q.how
+        return None
 
     def all_quantities(self) -> list[Quantity]:
         qs = list(self.inputs.quantities()) + list(self.uncertainty.values.values())
         qs.append(self.contraction_expert.euclidean.to_quantity())
         if self.contraction_learned is not None:
             q = self.contraction_learned.euclidean.to_quantity()
-            qs.append(Quantity("lambda_learned", q.value, q.how, "L1-DRAC Assumption 2", q.note))
+            qs.append(q.renamed("lambda_learned", source="L1-DRAC Assumption 2"))
+        qs.extend(self.extra_quantities)
         if self.l1 is not None:
             have = {q.name for q in qs}
             qs.extend(q for q in self.l1.constants.values() if q.name not in have)
@@ -204,10 +258,10 @@ class Certificate:
 
     @property
     def rho(self) -> float | None:
-        """``rho = rho_TaSIL + rho_L1`` (DRIP eq. TotalTIG) when both parts exist."""
+        """``rho = rho_TaSIL + rho_L1`` (DRIP eq. TotalTIG) when both parts exist (rounded up)."""
         if self.rho_l1 is None or self.rho_tasil is None:
             return None
-        return self.rho_tasil + self.rho_l1
+        return up(self.rho_tasil + self.rho_l1)
 
     def to_dict(self) -> dict[str, Any]:
         ce = self.contraction_expert
@@ -217,6 +271,8 @@ class Certificate:
             "method": ce.euclidean.method,
             "how": ce.euclidean.how.value,
             "region": ce.euclidean.region,
+            "scope": ce.euclidean.scope.to_dict(),
+            "invariant_set": None if self.invariance is None else self.invariance.to_dict(),
             "expert": ce.to_dict(),
             "learned": None
             if self.contraction_learned is None
@@ -225,12 +281,14 @@ class Certificate:
         diss = None
         if self.delta_iss is not None:
             d = self.delta_iss
+            g = next((q for q in self.extra_quantities if q.name == "gamma0"), None)
             diss = {
-                "gain": json_float(d.tight_gain_asymptotic),
+                "gain": json_float(d.tight_gain_asymptotic if g is None else g.value),
                 "gain_paper": json_float(d.paper_gain_asymptotic),
                 "theta_star": json_float(d.theta_star),
                 "used": d.used,
-                "how": How(d.how).value,
+                "how": (g.how if g is not None else How(d.how)).value,
+                "scope": ce.euclidean.scope.describe(),
                 "source": "tighter comparison-lemma bound (this project's derivation, valid under "
                 "DRIP Assumption 2); the paper's Proposition 1 gain is gain_paper",
                 "detail": d.to_dict(),
@@ -240,12 +298,23 @@ class Certificate:
             "rho_l1": json_float(self.rho_l1) if self.rho_l1 is not None else None,
             "rho_total": json_float(self.rho) if self.rho is not None else None,
             "source": "DRIP eq. (TotalTIG): rho = rho_TaSIL + rho_L1",
+            "note": "rho_TaSIL is a (1 - delta) radius of max_t ||x'_t - x*_t||, rho_L1 an L_2p "
+            "moment bound of ||X_t - x'_t||: their sum is reported as the paper states it, and "
+            "validate checks each part with the statistic it bounds",
         }
+        verdict, reasons = verdict_of(self.assumptions)
         return {
+            "schema_version": SCHEMA_VERSION,
             "system": self.system.to_dict(),
-            "certified": self.certified,
+            "verdict": verdict.value,
+            "verdict_reasons": list(reasons),
+            "certified": verdict == Verdict.CERTIFIED,
+            "parts": self.part_verdicts(),
             "sound": not self.estimated,
             "estimated_constants": list(self.estimated),
+            "given_constants": sorted(
+                {q.name for q in self.all_quantities() if q.how == How.GIVEN}
+            ),
             "assumptions": [c.to_dict() for c in self.assumptions],
             "constants": {q.name: q.to_dict() for q in self.all_quantities()},
             "input_operator": self.inputs.to_dict(),
@@ -260,6 +329,68 @@ class Certificate:
         }
 
 
+SCHEMA_VERSION = 2
+"""Version of :meth:`Certificate.to_dict`'s layout (2: ``verdict``, ``parts``, scopes)."""
+
+
+def contraction_options(spec: Spec) -> ContractionOptions:
+    """The ``[contraction]`` settings of ``spec``, with the region checked against the support."""
+    s = spec.system
+    opts = ContractionOptions.from_table(spec.table("contraction"), s.n)
+    if opts.region is not None and not Scope(opts.region).contains_box(s.support):
+        raise SpecError(
+            f"the region {[list(r) for r in opts.region]} does not contain the support "
+            f"{[list(r) for r in s.support]} of the initial law: a rate proved there says "
+            "nothing about trajectories that start outside it; give a region that contains "
+            "[initial] support",
+            field="contraction.region",
+            path=spec.path,
+        )
+    return opts
+
+
+def _rate_check(cid: str, r: Any, what: str, source: str) -> Check:
+    """``mu_2 <= -lambda < 0`` for one closed loop, labelled from the rate's provenance."""
+    lam = r.to_quantity()
+    return Check.compare(
+        cid,
+        Quantity.derive("max_mu2", -lam.value, inputs=[lam]),
+        0.0,
+        f"{what}: mu_2(J) <= -lambda with lambda = {r.rate:.6g} ({r.how.value}, {r.method}) on "
+        f"{r.region}" + ("" if r.holds else "; contraction is not established"),
+        strict=True,
+        source=source,
+        witness=None if r.holds else r.witness,
+    )
+
+
+def _invariance(s: System, r: Any, opts: ContractionOptions) -> InvariantBall | None:
+    """A forward-invariant ball inside the box where the expert's rate is proved (None when the
+    rate is global or not positive)."""
+    if r.scope.all_x or not r.holds or not r.how.proved:
+        return None
+    from drip_cert._jax import jnp
+    from drip_cert.analysis.block_enclosure import block_enclose_callback
+
+    num = s.numeric
+
+    def F_num(z):
+        z = jnp.asarray(z, dtype=jnp.float64)
+        return np.asarray(num.f(0.0, z) + num.g(0.0) @ num.expert(z))
+
+    return best_invariant_set(
+        s.closed_loop("expert"),
+        s.states,
+        s.t,
+        r.rate,
+        r.scope,
+        np.asarray(s.support, dtype=float),
+        s.horizon,
+        F_num,
+        block_enclose_callback(s.blocks) if s.blocks else None,
+    )
+
+
 def certify(spec: Spec, *, tasil: Any | None = None) -> Certificate:
     """Run the certificate pipeline on ``spec``.
 
@@ -272,160 +403,160 @@ def certify(spec: Spec, *, tasil: Any | None = None) -> Certificate:
         ``None``.
     """
     s = spec.system
-    opts = ContractionOptions.from_table(spec.table("contraction"), s.n)
+    opts = contraction_options(spec)
     given = spec.table("constants")
     ic = input_constants(s)
     uc = uncertainty_constants(s, given)
     notes: list[str] = []
     checks: list[Check] = []
+    extra_q: list[Quantity] = []
+    wants_l1 = "l1drac" in spec.tables
 
+    a1_inputs = [ic.Delta_g, uc["Delta_mu"], uc["Delta_sigma"]]
+    a1_finite = all(math.isfinite(q.value) for q in a1_inputs)
     checks.append(
-        Check(
-            id="DRIP-A1",
-            holds=ic.rank == s.m,
-            detail=(
-                f"g has full column rank m = {s.m} (smallest singular value "
-                f"{ic.min_singular_value:.4g}); Delta_g = {ic.Delta_g.value:.6g} (Frobenius), "
-                f"{ic.Delta_g_spectral.value:.6g} (spectral); Delta_mu = "
-                f"{uc['Delta_mu'].value:.6g} ({uc['Delta_mu'].how.value}), Delta_sigma = "
-                f"{uc['Delta_sigma'].value:.6g} ({uc['Delta_sigma'].how.value})"
+        Check.derive(
+            "DRIP-A1",
+            ic.rank.value == s.m and a1_finite,
+            (
+                f"g has full column rank m = {s.m} (smallest singular value >= "
+                f"{ic.min_singular_value.value:.4g}, {ic.rank.how.value}); Delta_g = "
+                f"{ic.Delta_g.value:.6g} (Frobenius), {ic.Delta_g_spectral.value:.6g} (spectral); "
+                f"Delta_mu = {uc['Delta_mu'].value:.6g} ({uc['Delta_mu'].how.value}), "
+                f"Delta_sigma = {uc['Delta_sigma'].value:.6g} ({uc['Delta_sigma'].how.value})"
+                + ("" if a1_finite else "; a growth bound is not finite")
             ),
-            lhs=float(ic.rank),
+            inputs=[ic.rank, ic.min_singular_value, *a1_inputs],
+            lhs=float(ic.rank.value),
             rhs=float(s.m),
-            margin=ic.min_singular_value,
+            margin=ic.min_singular_value.value,
             source="DRIP Assumption 1",
-            how=How.EXACT if s.g_is_constant else How.ESTIMATE,
         )
     )
 
     ce = analyse_contraction(s, "expert", opts)
     r = ce.euclidean
-    checks.append(
-        Check(
-            id="DRIP-A2",
-            holds=r.holds,
-            detail=(
-                f"expert closed loop: mu_2(J) <= -lambda with lambda = {r.rate:.6g} "
-                f"({r.how.value}, {r.method}) on {r.region}"
-                + ("" if r.holds else "; contraction is not established")
-                + (
-                    " [the paper asks for all x; this holds on the region named]"
-                    if r.region.startswith("box")
-                    else ""
-                )
-            ),
-            lhs=-r.rate,
-            rhs=0.0,
-            margin=r.rate,
-            source="DRIP Assumption 2",
-            how=r.how,
-            witness=None if r.holds else r.witness,
-        )
-    )
+    inv = _invariance(s, r, opts)
+    a2 = _rate_check("DRIP-A2", r, "expert closed loop", "DRIP Assumption 2")
+    checks.append(a2.with_scope(*_expert_scope(r, inv, s.horizon)))
+    lam_ex = r.to_quantity()
+
     cl = None
     if s.learned is not None:
         cl = analyse_contraction(s, "learned", opts)
         rl = cl.euclidean
-        checks.append(
-            Check(
-                id="L1DRAC-A2",
-                holds=rl.holds,
-                detail=(
-                    f"learned closed loop (the nominal system of the L1-DRAC layer): lambda = "
-                    f"{rl.rate:.6g} ({rl.how.value}, {rl.method}) on {rl.region}"
-                ),
-                lhs=-rl.rate,
-                rhs=0.0,
-                margin=rl.rate,
-                source="L1-DRAC Assumption 2",
-                how=rl.how,
-                witness=None if rl.holds else rl.witness,
-            )
+        a2l = _rate_check(
+            "L1DRAC-A2",
+            rl,
+            "learned closed loop (the nominal system of the L1-DRAC layer)",
+            "L1-DRAC Assumption 2",
         )
-    lam_l1 = (cl.euclidean if cl is not None else ce.euclidean).rate
-    dgp = ic.Delta_g_perp.value
-    mperp = max(uc["Delta_mu_perp"].value, uc["L_mu_perp"].value)
-    rhs7 = dgp * mperp
-    checks.append(
-        Check(
-            id="L1DRAC-A7",
-            holds=lam_l1 > rhs7,
-            detail=(
-                f"unmatched small gain: lambda = {lam_l1:.6g} > Delta_g_perp * max(Delta_mu_perp, "
-                f"L_mu_perp) = {dgp:.6g} * {mperp:.6g}"
-                f" = {rhs7:.6g}"
-            ),
-            lhs=rhs7,
-            rhs=lam_l1,
-            margin=lam_l1 - rhs7,
-            source="L1-DRAC Assumption 7",
-            how=How.ESTIMATE if uc["Delta_mu_perp"].how == How.ESTIMATE else How.SOUND,
-        )
+        if wants_l1:
+            checks.append(a2l.with_scope(*_sde_scope(rl.scope, s.horizon)))
+    src = cl if cl is not None else ce
+    lam_l1 = src.euclidean.to_quantity()
+    dgp = ic.Delta_g_perp
+    mu_perp, l_perp = uc["Delta_mu_perp"], uc["L_mu_perp"]
+    mperp = Quantity.derive(
+        "max(Delta_mu_perp, L_mu_perp)",
+        _nan_max(mu_perp.value, l_perp.value),
+        inputs=[mu_perp, l_perp],
     )
+    rhs7 = Quantity.derive(
+        "Delta_g_perp * max(Delta_mu_perp, L_mu_perp)",
+        mul_up(dgp.value, mperp.value),
+        inputs=[dgp, mperp],
+    )
+    a7 = Check.compare(
+        "L1DRAC-A7",
+        rhs7,
+        lam_l1,
+        f"unmatched small gain: lambda = {lam_l1.value:.6g} > Delta_g_perp * max(Delta_mu_perp, "
+        f"L_mu_perp) = {dgp.value:.6g} * {mperp.value:.6g} = {rhs7.value:.6g}",
+        strict=True,
+        source="L1-DRAC Assumption 7",
+    )
+    if wants_l1:
+        checks.append(a7.with_scope(*_sde_scope(a7.scope, s.horizon)))
+    else:
+        notes.append(
+            "no [l1drac] table: the L1-DRAC assumptions (2 for the learned loop, 7) are reported "
+            "under contraction and constants but are not part of the verdict"
+        )
 
     diss = None
+    gamma0 = None
     if r.holds:
         from drip_cert.analysis.iss import delta_iss
 
         try:
-            diss = delta_iss(r.to_quantity(), ic.Delta_g, ic.Delta_g_spectral)
+            diss = delta_iss(lam_ex, ic.Delta_g, ic.Delta_g_spectral)
         except AssumptionViolation as exc:  # pragma: no cover - guarded by r.holds
             notes.append(str(exc))
+        else:
+            gamma0 = Quantity.derive(
+                "gamma0",
+                div_up(ic.Delta_g_spectral.value, lam_ex.value),
+                inputs=[ic.Delta_g_spectral, lam_ex],
+                source="delta-ISS gain (comparison lemma)",
+                note="sup||g||_2 / lambda, rounded up",
+            )
+            extra_q.append(gamma0)
     else:
         notes.append("no delta-ISS gain: the expert closed loop is not shown to contract")
 
     tasil_prov: dict[str, Any] = {}
-    if tasil is None and s.learned is not None and "tasil" in spec.tables and diss is not None:
+    if tasil is None and s.learned is not None and "tasil" in spec.tables and gamma0 is not None:
         from drip_cert.learn.workflow import demonstrations, tasil_section, tasil_settings
 
         st = tasil_settings(spec.table("tasil"))
         train = demonstrations(s, st.trajectories, st.samples, st.seed, 0)
         held = demonstrations(s, st.heldout, st.samples, st.seed, 1) if st.heldout else None
-        gamma0 = Quantity(
-            "gamma0",
-            diss.tight_gain_asymptotic,
-            diss.how,
-            "delta-ISS gain (comparison lemma)",
-            "||g||_2 / lambda",
+        room = math.inf if inv is None else (inv.room if inv.proved else math.inf)
+        tasil, tasil_prov, tq = tasil_section(
+            s,
+            train,
+            held,
+            gamma0,
+            st,
+            room=room,
+            speed_sound=r.scope.all_x or (inv is not None and inv.proved),
+            method=f"{st.method}-{st.order}",
         )
-        tasil, tasil_prov = tasil_section(
-            s, train, held, gamma0, r.region.startswith("all"), st, method=f"{st.method}-{st.order}"
-        )
+        extra_q.extend(q for q in tq if q.name != "gamma0")
     if tasil is not None:
         ok = tasil.rho is not None and math.isfinite(tasil.rho)
-        checks.append(
-            Check(
-                id="TaSIL",
-                holds=ok,
-                detail=(
-                    "rho_TaSIL = "
-                    + (f"{tasil.rho:.6g}" if ok else "inf")
-                    + f" ({tasil.rho_form}); deterministic gap bound over the given initial "
-                    f"states {tasil.gap_bound:.6g}" + ("" if ok else f"; {tasil.gap_reason}")
-                ),
-                lhs=float(tasil.rho) if ok else math.inf,
-                rhs=math.inf,
-                margin=math.nan,
-                source="math/tasil.md sections 3-4 (this project's construction)",
-                how=How.SOUND,
-            )
+        t_inputs = [q for q in extra_q] + [lam_ex]
+        tcheck = Check.derive(
+            "TaSIL",
+            ok,
+            "rho_TaSIL = "
+            + (f"{tasil.rho:.6g}" if ok else "inf")
+            + f" ({tasil.rho_form}); deterministic gap bound over the given initial "
+            f"states {tasil.gap_bound:.6g}" + ("" if ok else f"; {tasil.gap_reason}"),
+            inputs=t_inputs,
+            method=How.SOUND,
+            lhs=float(tasil.rho) if ok else math.inf,
+            rhs=math.inf,
+            source="math/tasil.md sections 3-4 (this project's construction)",
         )
+        checks.append(tcheck.with_scope(*_tasil_scope(r, inv, tasil, s.horizon)))
     l1 = None
-    if "l1drac" in spec.tables:
+    if wants_l1:
         from drip_cert.bounds.l1_system import l1_section
 
-        src = cl if cl is not None else ce
         lam_q = src.euclidean.to_quantity()
         est = -src.euclidean.max_mu_sampled
         if lam_q.value <= 0 < est:
-            # the sound route did not establish contraction but sampling suggests it: design
-            # with the estimate, labelled so, and the L1DRAC-A2 check above stays failed
-            lam_q = Quantity(
+            # the rigorous route did not establish contraction but sampling suggests it: design
+            # with the estimate, labelled so; the L1DRAC-A2 check above stays failed
+            lam_q = Quantity.derive(
                 "lambda",
                 est,
-                How.ESTIMATE,
-                lam_q.source,
-                "sampled estimate of the rate (the sound bound did not establish "
+                inputs=[lam_q],
+                method=How.ESTIMATE,
+                source=lam_q.source,
+                note="sampled estimate of the rate (the sound bound did not establish "
                 "contraction): the L1-DRAC design below is conditional on it",
             )
             notes.append(
@@ -437,37 +568,36 @@ def certify(spec: Spec, *, tasil: Any | None = None) -> Certificate:
             spec.table("l1drac"),
             given,
             lam_q,
-            src.euclidean.region.startswith("all"),
+            lam_q.scope.all_x,
             src.policy,
             {q.name: q for q in ic.quantities()},
             uc.values,
         )
-        conditional = lam_q.how == How.ESTIMATE
-        checks.append(
-            Check(
-                id="L1DRAC-design",
-                holds=l1.feasible,
-                detail=(
-                    (
-                        "conditional on the ESTIMATED rate lambda = " + f"{lam_q.value:.6g}: "
-                        if conditional
-                        else ""
+        design_inputs = list(l1.constants.values())
+        dcheck = Check.derive(
+            "L1DRAC-design",
+            l1.feasible,
+            (
+                (
+                    "conditional on the ESTIMATED rate lambda = " + f"{lam_q.value:.6g}: "
+                    if lam_q.how == How.ESTIMATE
+                    else ""
+                )
+                + (
+                    "feasible design: "
+                    + ", ".join(
+                        f"{k} = {l1.design.to_dict()[k]:.6g}"
+                        for k in ("omega", "lambda_s", "Ts", "rho_r", "rho_a", "rho")
                     )
-                    + (
-                        "feasible design: "
-                        + ", ".join(
-                            f"{k} = {l1.design.to_dict()[k]:.6g}"
-                            for k in ("omega", "lambda_s", "Ts", "rho_r", "rho_a", "rho")
-                        )
-                        if l1.feasible
-                        else "no feasible design: "
-                        + (l1.design.reason if l1.design is not None else l1.error)
-                    )
-                ),
-                source="L1-DRAC (16), (21), (24)",
-                how=How.ESTIMATE if conditional else How.EXACT,
-            )
+                    if l1.feasible
+                    else "no feasible design: "
+                    + (l1.design.reason if l1.design is not None else l1.error)
+                )
+            ),
+            inputs=design_inputs,
+            source="L1-DRAC (16), (21), (24)",
         )
+        checks.append(dcheck.with_scope(*_sde_scope(dcheck.scope, s.horizon)))
     return Certificate(
         system=s,
         assumptions=tuple(checks),
@@ -480,4 +610,58 @@ def certify(spec: Spec, *, tasil: Any | None = None) -> Certificate:
         tasil=tasil,
         tasil_provenance=tasil_prov,
         notes=tuple(notes),
+        invariance=inv,
+        extra_quantities=tuple(extra_q),
     )
+
+
+def _nan_max(a: float, b: float) -> float:
+    """``max(a, b)`` that propagates NaN (Python's ``max`` silently drops it)."""
+    if math.isnan(a) or math.isnan(b):
+        return math.nan
+    return max(a, b)
+
+
+def _time_ok(scope: Scope, horizon: float) -> tuple[bool, str]:
+    if scope.covers_time(horizon):
+        return True, ""
+    return False, f"proved only for {scope.describe()}, not for t in [0, {horizon:g}]"
+
+
+def _expert_scope(r: Any, inv: InvariantBall | None, horizon: float) -> tuple[bool, str]:
+    """Is the expert's rate usable for the trajectories the certificate is about?"""
+    ok, why = _time_ok(r.scope, horizon)
+    if not ok:
+        return ok, why
+    if r.scope.all_x:
+        return True, "the rate holds for all x"
+    if inv is not None and inv.proved:
+        return True, inv.reason
+    return False, (
+        f"the expert rate is proved only on {r.region}"
+        + (f"; {inv.reason}" if inv is not None else "")
+    )
+
+
+def _tasil_scope(r: Any, inv: InvariantBall | None, tasil: Any, horizon: float) -> tuple[bool, str]:
+    """The TaSIL bound uses the rate along the learned trajectory: it must stay where the rate
+    (and L_Delta) hold. With a proved invariant ball the lemma's tube condition (gap <= R, R
+    below the ball's room) keeps it there."""
+    ok, why = _expert_scope(r, inv, horizon)
+    if not ok:
+        return ok, why + "; the learned trajectories are not shown to stay in the box"
+    if r.scope.all_x:
+        return True, "the expert rate holds for all x; L_Delta on the tube of radius R"
+    return True, (
+        f"{inv.reason}; the lemma's tube radius R = {tasil.R:.6g} is below that room, so the "
+        "learned trajectories stay in the box (first-exit argument)"
+    )
+
+
+def _sde_scope(scope: Scope, horizon: float) -> tuple[bool, str]:
+    ok, why = _time_ok(scope, horizon)
+    if not ok:
+        return ok, why
+    if scope.all_x:
+        return True, "holds for all x"
+    return False, _SDE_REASON.format(scope=scope.describe())

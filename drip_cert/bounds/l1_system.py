@@ -25,6 +25,7 @@ import numpy as np
 
 from drip_cert.errors import AssumptionViolation, SpecError
 from drip_cert.provenance import How, Quantity
+from drip_cert.rounding import norm2_up, up_np
 from drip_cert.system.system import System
 
 L1_KEYS = {
@@ -133,9 +134,7 @@ def l1_section(
             f"the {which} closed loop is not shown to contract (lambda = "
             f"{lam.value:.6g}): L1-DRAC Assumption 2 fails, no design",
         )
-    q["lambda"] = Quantity(
-        "lambda", lam.value, lam.how, "L1-DRAC Assumption 2 (" + which + " closed loop)", lam.note
-    )
+    q["lambda"] = lam.renamed("lambda", source="L1-DRAC Assumption 2 (" + which + " closed loop)")
     cl = closed_loop_constants(s, which, lam, global_rate)
     for qq in cl.quantities():
         q[qq.name] = qq
@@ -143,13 +142,8 @@ def l1_section(
         q[name] = input_q[name]
     for name, qq in unc_q.items():
         q[name] = qq
-    # time-Lipschitz constants (hats): zero for time-invariant terms
-    t_free = not any(
-        s.t in e.free_symbols
-        for mat in (s.lambda_mu, s.lambda_sigma, s.diffusion)
-        if mat is not None
-        for e in mat
-    )
+    # time-Lipschitz constants (hats): computed with the uncertainty constants (sup over t and a
+    # of the time derivative, through g(t) too); a name they lack is unknown
     for name in (
         "L_p_hat",
         "L_p_par_hat",
@@ -161,15 +155,14 @@ def l1_section(
         "L_sigma_par_hat",
         "L_sigma_perp_hat",
     ):
-        q[name] = Quantity(
-            name,
-            0.0 if t_free else math.nan,
-            How.EXACT if t_free else How.ESTIMATE,
-            "L1-DRAC Assumptions 1, 5, 6",
-            "time-invariant terms"
-            if t_free
-            else "time-varying terms: give this constant in [constants]",
-        )
+        if name not in q:
+            q[name] = Quantity(
+                name,
+                math.nan,
+                How.ESTIMATE,
+                "L1-DRAC Assumptions 1, 5, 6",
+                "not computed: give this constant in [constants]",
+            )
     if "Delta_star" in table:
         raise SpecError("give Delta_star in [constants], not in [l1drac]", field="l1drac")
     alpha_default = 0.0
@@ -177,23 +170,26 @@ def l1_section(
     if s.true_support is not None:
         a = np.array(s.support)
         b = np.array(s.true_support)
-        far = np.maximum(np.abs(a[:, 1] - b[:, 0]), np.abs(b[:, 1] - a[:, 0]))
-        alpha_default = float(np.linalg.norm(far))
+        far = up_np(np.maximum(np.abs(a[:, 1] - b[:, 0]), np.abs(b[:, 1] - a[:, 0])))
+        alpha_default = norm2_up(far)
         alpha_note = "largest distance between the supports of D and D_bar (any coupling)"
-    q["alpha"] = Quantity(
+    # the supports' distance is a proved bound on any coupling's W_2p (outward rounded); a value
+    # in [l1drac] is the user's claim about D and D_bar
+    q["alpha"] = Quantity.derive(
         "alpha",
         _num(table, "alpha", alpha_default, positive=False),
-        How.GIVEN if "alpha" in table else How.SOUND,
-        "L1-DRAC (18a)",
-        "given in [l1drac]" if "alpha" in table else alpha_note,
+        method=How.GIVEN if "alpha" in table else How.SOUND,
+        source="L1-DRAC (18a)",
+        note="given in [l1drac]" if "alpha" in table else alpha_note,
     )
     for key in ("eps_r", "eps_a"):
-        q[key] = Quantity(
+        # a slack of (16) is a design choice, not a claim about the system: the number the
+        # design uses is exactly this one (nothing to be true or false about it)
+        q[key] = Quantity.derive(
             key,
             _num(table, key, DEFAULT_EPS),
-            How.GIVEN,
-            "L1-DRAC (16)",
-            "user slack" + ("" if key in table else f" (default {DEFAULT_EPS})"),
+            source="L1-DRAC (16)",
+            note="design slack" + ("" if key in table else f" (default {DEFAULT_EPS})"),
         )
     for name, v in given.items():
         if name in q:

@@ -21,7 +21,8 @@ import sympy as sp
 from drip_cert.errors import SpecError
 from drip_cert.learn.data import Demonstrations, generate_demonstrations
 from drip_cert.learn.mlp import MLP
-from drip_cert.provenance import How, Quantity
+from drip_cert.provenance import How, Quantity, Scope
+from drip_cert.rounding import add_up, mul_up, spectral_norm_upper, sq_up, sqrt_up
 from drip_cert.system.blocks import mlp_block
 from drip_cert.system.system import System
 
@@ -202,18 +203,20 @@ def jacobian_lipschitz(s: System, which: str, box: np.ndarray | None = None) -> 
                 "DRIP Assumption PolicyRegularity (b)",
                 "affine policy: zero Hessian",
             )
-        total, notes = 0.0, []
+        total, notes, parts = 0.0, [], []
         for bname, C in sorted(dec.C.items()):
-            c2 = float(np.linalg.norm(C, 2))
-            L = jacobian_lipschitz_bound(s.blocks[bname].mlp).value
-            total += c2 * L
-            notes.append(f"||C_{bname}||_2 = {c2:.4g} times L_d{bname} = {L:.4g}")
-        return Quantity(
+            c2 = float(spectral_norm_upper(np.atleast_2d(C)))
+            Lq = jacobian_lipschitz_bound(s.blocks[bname].mlp)
+            parts.append(Lq)
+            total = add_up(total, mul_up(c2, Lq.value))
+            notes.append(f"||C_{bname}||_2 <= {c2:.4g} times L_d{bname} = {Lq.value:.4g}")
+        return Quantity.derive(
             f"L_dpi_{which}",
-            total * (1 + 1e-12),
-            How.SOUND,
-            "DRIP Assumption PolicyRegularity (b)",
-            "policy affine in MLP blocks; "
+            total,
+            inputs=parts,
+            method=How.SOUND,
+            source="DRIP Assumption PolicyRegularity (b)",
+            note="policy affine in MLP blocks; "
             + "; ".join(notes)
             + " (layerwise product-rule bound, global)",
         )
@@ -232,15 +235,16 @@ def jacobian_lipschitz(s: System, which: str, box: np.ndarray | None = None) -> 
                             list(s.states),
                             [tuple(b) for b in np.asarray(box, dtype=float)],
                         )
-                        acc += max(abs(lo), abs(hi)) ** 2
+                        acc = add_up(acc, sq_up(max(abs(lo), abs(hi))))
             region = [[round(float(v), 4) for v in row] for row in np.asarray(box)]
-            return Quantity(
+            return Quantity.derive(
                 f"L_dpi_{which}",
-                float(np.sqrt(acc)) * (1 + 1e-12),
-                How.SOUND,
-                "DRIP Assumption PolicyRegularity (b)",
-                f"interval enclosure of d^2 pi (Frobenius) on the box {region}: "
+                sqrt_up(acc),
+                method=How.SOUND,
+                source="DRIP Assumption PolicyRegularity (b)",
+                note=f"interval enclosure of d^2 pi (Frobenius) on the box {region}: "
                 "valid on that box only",
+                scope=Scope(tuple(map(tuple, np.asarray(box, dtype=float)))),
             )
         except UnsupportedExpression:
             pass
@@ -306,14 +310,16 @@ def _kink_branches(pol: sp.Matrix, s: System, box: np.ndarray | None):
 
 
 # ------------------------------------------------------------------ h_0, h_1 along trajectories
-def trajectory_h(s: System, demos: Demonstrations, L_Delta: float, contraction_global: bool):
+def trajectory_h(s: System, demos: Demonstrations, L_Delta: float, speed_sound: bool):
     """Per-trajectory sound ``(h_0, h_1)`` of ``Delta = pi_IL - pi*`` along expert trajectories.
 
     Between grid points the speed of an autonomous contracting closed loop does not grow
     (``d/dt x_dot = J x_dot`` and ``mu_2(J) < 0``), so ``||x_dot(t)|| <= ||x_dot(t_k)||`` on
     ``[t_k, t_{k+1}]``; this makes the Lipschitz correction of math/tasil.md section 4 sound when
-    the expert contracts on all of ``R^n`` and ``f`` does not depend on ``t``. Otherwise the
-    grid maximum of the speed is used and the result is labelled an estimate.
+    the expert contracts wherever its trajectories go (``speed_sound``: the rate holds for all
+    ``x``, or on a box that contains a proved forward-invariant set around the support) and ``f``
+    does not depend on ``t``. Otherwise the grid maximum of the speed is used and the result is
+    labelled an estimate.
     """
     from drip_cert._jax import jax, jnp
     from drip_cert.bounds.tasil import h_continuous
@@ -324,7 +330,7 @@ def trajectory_h(s: System, demos: Demonstrations, L_Delta: float, contraction_g
     field = nominal_field(s)
     speed_fn = jax.jit(jax.vmap(lambda z: jnp.linalg.norm(field(0.0, z, num.expert(z)))))
     autonomous = not any(s.t in e.free_symbols for e in s.f) and s.g_is_constant
-    sound = contraction_global and autonomous
+    sound = speed_sound and autonomous
     hs = []
     for traj in demos.states:
         X = jnp.asarray(traj)
@@ -387,14 +393,32 @@ def tasil_section(
     train: Demonstrations,
     heldout: Demonstrations | None,
     gamma0: Quantity,
-    contraction_global: bool,
     settings: TasilSettings,
+    *,
+    room: float = math.inf,
+    speed_sound: bool = False,
     method: str = "tasil-1",
 ):
     """The TaSIL certificate of ``s.learned`` (math/tasil.md sections 3-4).
 
-    ``gamma0`` is the linear delta-ISS gain of the expert closed loop (tighter comparison bound);
-    ``L_Delta = L_dpi(pi_IL) + L_dpi(pi*)`` (triangle inequality).
+    Parameters
+    ----------
+    gamma0
+        The linear delta-ISS gain of the expert closed loop (tighter comparison bound).
+    room
+        How far the learned trajectory may stray from the expert's before leaving the region
+        where the expert's rate is proved (``inf`` for a global rate; the room of a proved
+        forward-invariant ball otherwise, :mod:`drip_cert.analysis.invariance`). The lemma's tube
+        radius ``R`` is capped below it, so that the gap bound keeps the learned trajectory there.
+    speed_sound
+        Whether the expert's speed is proved non-increasing along its trajectories (the rate holds
+        wherever they go), which makes the continuous-time sups of ``h_0, h_1`` sound.
+
+    Returns
+    -------
+    (TasilCertificate, provenance dict, quantities)
+        ``quantities`` are the inputs the TaSIL check rests on (``L_dpi_*``, ``h0``, ``h1``), each
+        with its computed label. ``L_Delta = L_dpi(pi_IL) + L_dpi(pi*)`` (triangle inequality).
     """
     from drip_cert.bounds.tasil import tasil_certificate
 
@@ -406,27 +430,43 @@ def tasil_section(
     L_il = jacobian_lipschitz(s, "learned", box)
     L_ex = jacobian_lipschitz(s, "expert", box)
     R = settings.tube_radius
-    if "box only" in L_il.note or "box only" in L_ex.note:
+    if not (L_il.scope.all_x and L_ex.scope.all_x):
         R = min(R, margin)
-    L_Delta = L_il.value + L_ex.value
+    if math.isfinite(room):
+        # strictly below the room (the first-exit argument needs gap < room)
+        R = min(R, math.nextafter(room, 0.0))
+    L_Delta = Quantity.derive(
+        "L_Delta",
+        add_up(L_il.value, L_ex.value),
+        inputs=[L_il, L_ex],
+        source="DRIP Assumption PolicyRegularity (b)",
+        note="L_dpi(pi_IL) + L_dpi(pi*)",
+    )
     provenance = {
         "L_dpi_learned": L_il.to_dict(),
         "L_dpi_expert": L_ex.to_dict(),
         "gamma0": gamma0.to_dict(),
+        "tube_radius_R": R,
+        "room": room,
     }
-    if not math.isfinite(L_Delta):
-        return _not_lipschitz(
-            L_il if not math.isfinite(L_il.value) else L_ex,
-            train,
-            heldout,
-            gamma0,
-            R,
-            settings,
-            method,
-        ), provenance
-    h_train, how_t = trajectory_h(s, train, L_Delta, contraction_global)
+    qs: list[Quantity] = [gamma0, L_il, L_ex]
+    if not math.isfinite(L_Delta.value):
+        return (
+            _not_lipschitz(
+                L_il if not math.isfinite(L_il.value) else L_ex,
+                train,
+                heldout,
+                gamma0,
+                R,
+                settings,
+                method,
+            ),
+            provenance,
+            tuple(qs),
+        )
+    h_train, how_t = trajectory_h(s, train, L_Delta.value, speed_sound)
     h_val, _ = (
-        trajectory_h(s, heldout, L_Delta, contraction_global)
+        trajectory_h(s, heldout, L_Delta.value, speed_sound)
         if heldout is not None
         else (None, how_t)
     )
@@ -438,7 +478,7 @@ def tasil_section(
         [h.h1 for h in h_train],
         gamma0=gamma0.value,
         tau=tau,
-        L_Delta=L_Delta,
+        L_Delta=L_Delta.value,
         delta=settings.delta,
         eta=settings.eta,
         R=R,
@@ -448,7 +488,23 @@ def tasil_section(
         continuous=True,
     )
     provenance["h_how"] = how_t.value
-    return cert, provenance
+    h_note = (
+        "continuous-time sup along the expert trajectories (math/tasil.md section 4)"
+        if how_t == How.SOUND
+        else "grid values with an unproved speed bound between grid points: an estimate"
+    )
+    for name, val in (("h0", cert.h0), ("h1", cert.h1)):
+        qs.append(
+            Quantity.derive(
+                name,
+                val,
+                inputs=[L_Delta],
+                method=how_t,
+                source="math/tasil.md (A3)",
+                note=h_note,
+            )
+        )
+    return cert, provenance, tuple(qs)
 
 
 def _not_lipschitz(
