@@ -3,7 +3,8 @@
 :func:`validate` simulates the four processes of the DRIP paper with
 :func:`drip_cert.sim.engine.simulate` and compares like with like:
 
-* ``rho_TaSIL`` is a ``(1 - delta_TaSIL)`` radius of ``max_t ||x'_t - x*_t||`` (math/tasil.md 3.4):
+* ``rho_TaSIL`` is a ``(1 - delta_TaSIL)`` radius of ``max_t ||x'_t - x*_t||``
+  (docs/math/tasil.md 3.4):
   the fraction of paths whose maximum exceeds it, with its one-sided Clopper-Pearson lower
   bound, against ``delta_TaSIL``, and the empirical ``(1 - delta)``-quantile of the per-path
   maxima beside ``rho`` (``policy_radius``);

@@ -73,7 +73,7 @@ def check_impl_iss(ctx: Context) -> CheckResult:
     )
 
 
-@register("impl.tasil", "drip_cert.bounds.tasil vs math/tasil.md (eps*, rho_TaSIL)")
+@register("impl.tasil", "drip_cert.bounds.tasil vs docs/math/tasil.md (eps*, rho_TaSIL)")
 def check_impl_tasil(ctx: Context) -> CheckResult:
     """eps_star and rho_tasil of drip-cert vs the formulas of tasil_gap / tasil_rates."""
     name = "impl.tasil"
@@ -106,7 +106,7 @@ def check_impl_tasil(ctx: Context) -> CheckResult:
         worst = max(worst, abs(theirs - mine) / mine)
     return result(
         name,
-        "drip_cert.bounds.tasil vs math/tasil.md (eps*, rho_TaSIL)",
+        "drip_cert.bounds.tasil vs docs/math/tasil.md (eps*, rho_TaSIL)",
         holds=bool(worst <= RHO_REL_TOL),
         residual=worst,
         detail=f"max rel difference (eps*, rho_TaSIL at tau0=0) {worst:.1e}",

@@ -4,7 +4,7 @@
   ``x^{2p}`` and random / adversarial laws);
 * Markov step: with ``kappa = e rho`` and ``p = log sqrt(1/delta)``,
   ``P(||Z|| >= kappa) <= (rho/kappa)^{2p} = delta`` (symbolic, and extremal two-point laws);
-* integer-p variant (math/l1drac.md, [derived]): ``p = ceil(log(1/delta)/2)``,
+* integer-p variant (docs/math/l1drac.md, [derived]): ``p = ceil(log(1/delta)/2)``,
   ``kappa = rho(p) delta^{-1/(2p)} <= e rho(p)`` and ``(rho/kappa)^{2p} = delta`` for every
   ``delta in (0, 1)``.
 """

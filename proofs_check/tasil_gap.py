@@ -1,4 +1,5 @@
-"""The imitation-gap lemma that drip-cert uses for DRIP Theorem "TaSIL" (math/tasil.md Sec. 3.1).
+"""The imitation-gap lemma that drip-cert uses for DRIP Theorem "TaSIL"
+(docs/math/tasil.md Sec. 3.1).
 
 Lemma (p = 1, linear delta-ISS gain gamma_0, eta = R = infinity here): with
 ``h0 = max_t ||Delta(x*_t)||``, ``h1 = max_t ||d Delta(x*_t)||_op``, ``L`` the Lipschitz
@@ -27,7 +28,7 @@ from scipy.optimize import minimize
 
 from proofs_check._core import CheckResult, Context, register, result
 
-LABEL = "DRIP Thm. TaSIL (thm:TaSIL) via math/tasil.md Lemma 3.1"
+LABEL = "DRIP Thm. TaSIL (thm:TaSIL) via docs/math/tasil.md Lemma 3.1"
 
 RATIO_TOL = 1e-9  # gap/bound is computed from <= 60 steps of O(1) arithmetic: rounding only
 

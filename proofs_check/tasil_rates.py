@@ -1,4 +1,5 @@
-"""Rates of rho_TaSIL(delta, n) = (6 gamma0 / delta) R_0(n, delta/3) (math/tasil.md Sec. 3.3-3.4).
+"""Rates of rho_TaSIL(delta, n) = (6 gamma0 / delta) R_0(n, delta/3)
+(docs/math/tasil.md Sec. 3.3-3.4).
 
 ``R_0(n, delta) = tau_0 + (b_0/n) (2 + q log(1 + 2 B L n / b_0) + log(2/delta))``.
 
@@ -26,7 +27,7 @@ g0, b0, q, B, L, n, delta, tau0 = sp.symbols(
 
 
 def R0(n_, delta_, tau=0):
-    """Expectation-form generalization term of math/tasil.md Sec. 3.3(b), j = 0."""
+    """Expectation-form generalization term of docs/math/tasil.md Sec. 3.3(b), j = 0."""
     return tau + (b0 / n_) * (2 + q * sp.log(1 + 2 * B * L * n_ / b0) + sp.log(2 / delta_))
 
 

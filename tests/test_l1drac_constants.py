@@ -34,7 +34,7 @@ SLOPE_TOL = 0.02
 
 
 def di_constants() -> L1Constants:
-    """The double-integrator constants of the example file (math/l1drac.md section 8)."""
+    """The double-integrator constants of the example file (docs/math/l1drac.md section 8)."""
     return load_l1_constants(EXAMPLE)[0]
 
 

@@ -1,7 +1,7 @@
 """L1-DRAC conditions (16), (21), (24), the root searches and the designer (Sec. 3.2, Sec. 4).
 
 The monotonicity that justifies every bisection is checked on grids; every returned point is
-re-checked; the double-integrator magnitudes of math/l1drac.md section 8 are computed and
+re-checked; the double-integrator magnitudes of docs/math/l1drac.md section 8 are computed and
 compared with independent computations (brentq on the hand-written (16a)).
 """
 
@@ -272,7 +272,7 @@ def test_ultimate_bound_below_rho(c) -> None:
     assert all(b <= a for a, b in zip(vals, vals[1:]))
 
 
-# ------------------------------------------------------------------ math/l1drac.md section 8
+# ------------------------------------------------------------------ docs/math/l1drac.md section 8
 
 
 def test_double_integrator_magnitudes(c) -> None:

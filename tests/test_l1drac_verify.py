@@ -49,7 +49,7 @@ MAX_BACKOFF = L.BACKOFF_START * L.BACKOFF_GROWTH ** (L.BACKOFF_STEPS - 1)
 
 
 def di_constants() -> L.L1Constants:
-    """The double-integrator constants of the example file (math/l1drac.md section 8)."""
+    """The double-integrator constants of the example file (docs/math/l1drac.md section 8)."""
     return load_l1_constants(EXAMPLE)[0]
 
 

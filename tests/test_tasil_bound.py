@@ -1,6 +1,6 @@
 """Tests of drip_cert.bounds.tasil: the imitation-gap lemma on TaSIL's dummy2 system, sound h0/h1,
 Clopper-Pearson, the parametric and DRIP-shaped forms, and the certificate object
-(math/tasil.md sections 3-4, this project's construction)."""
+(docs/math/tasil.md sections 3-4, this project's construction)."""
 
 from __future__ import annotations
 
@@ -109,7 +109,7 @@ def _check_dummy2(n: int, seed: int) -> tuple[int, float]:
 def test_lemma_on_dummy2_random_instances():
     n_valid, max_ratio = _check_dummy2(2000, seed=20220528)
     assert n_valid >= 1000  # thousands of instances, most within the lemma's conditions
-    assert max_ratio >= TIGHT_RATIO  # nearly tight on some (math/tasil.md: 0.993)
+    assert max_ratio >= TIGHT_RATIO  # nearly tight on some (docs/math/tasil.md: 0.993)
 
 
 @pytest.mark.slow

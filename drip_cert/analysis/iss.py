@@ -180,7 +180,7 @@ class DeltaISSResult:
     def gain(self, T: float | None = None) -> Quantity:
         """Linear delta-ISS gain ``gamma_0 = sup_{t <= T}`` of the tighter gain (``T=None``: inf).
 
-        This is the ``gamma_0`` of the TaSIL certificate (math/tasil.md, Sec. 2-3).
+        This is the ``gamma_0`` of the TaSIL certificate (docs/math/tasil.md, Sec. 2-3).
         """
         value = self.tight_gain_asymptotic if T is None else _tight_gain_up(self, float(T))
         return Quantity(

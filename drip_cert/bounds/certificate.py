@@ -538,7 +538,7 @@ def certify(spec: Spec, *, tasil: Any | None = None) -> Certificate:
             method=How.SOUND,
             lhs=float(tasil.rho) if ok else math.inf,
             rhs=math.inf,
-            source="math/tasil.md sections 3-4 (this project's construction)",
+            source="docs/math/tasil.md sections 3-4 (this project's construction)",
         )
         checks.append(tcheck.with_scope(*_tasil_scope(r, inv, tasil, s.horizon)))
     l1 = None

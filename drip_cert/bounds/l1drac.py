@@ -3,7 +3,7 @@
 Source: A. Gahlawat, S. H. Karumanchi, N. Hovakimyan, "L1-DRAC: Distributionally Robust Adaptive
 Control -- Global Results", arXiv:2509.04619 (2025-09-04). Sec. 3.2 (conditions (16), (21), (24)),
 Sec. 4 (Lemma 4.4, Theorem 4.1), Appendix A (constants, in :mod:`drip_cert.bounds.l1drac_appendix`).
-The transcription used is ``math/l1drac.md``; every formula was re-checked against the PDF.
+The transcription used is ``docs/math/l1drac.md``; every formula was re-checked against the PDF.
 
 Public surface
 --------------
@@ -1600,7 +1600,8 @@ def p_for_delta(delta: float, p_star: int) -> int:
     """The integer moment order Theorem 4.1 needs for a violation probability delta.
 
     The paper sets ``p = log sqrt(1/delta)``, an integer only for ``delta = e^{-2p}``. The valid
-    integer variant (math/l1drac.md section 8) is ``p = max(1, ceil(0.5 log(1/delta)))``, for
+    integer variant (docs/math/l1drac.md section 7; erratum E9 in section 8) is
+    ``p = max(1, ceil(0.5 log(1/delta)))``, for
     which ``kappa_markov(rho, p, delta) <= e rho(p)``.
 
     Raises

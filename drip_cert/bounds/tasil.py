@@ -1,10 +1,10 @@
 """The TaSIL certificate: a bound on the policy-induced imitation gap (rho_TaSIL).
 
-Implements math/tasil.md sections 3 and 4, **a construction of this project, not TaSIL's own
+Implements docs/math/tasil.md sections 3 and 4, **a construction of this project, not TaSIL's own
 constant** (the body of Pfrommer et al. 2022, whose Thm 4.3 the DRIP paper's Theorem "TaSIL"
 cites, is not available). Every report carries :data:`LABEL`.
 
-Pieces (math/tasil.md numbering):
+Pieces (docs/math/tasil.md numbering):
 
 * :func:`h_discrete`, :func:`h_continuous` -- the trajectory quantities
   ``h_0 = sup_t ||Delta(x*_t)||`` and ``h_1 = sup_t ||d Delta(x*_t)||_op`` (A3), where
@@ -77,7 +77,7 @@ __all__ = [
     "tasil_certificate",
 ]
 
-LABEL = "construction of this project (math/tasil.md section 3), not TaSIL's own constant"
+LABEL = "construction of this project (docs/math/tasil.md section 3), not TaSIL's own constant"
 ASSUMPTIONS = (
     "A1: expert closed loop locally delta-ISS with linear gain gamma0 on perturbations <= eta",
     "A2: d(pi_hat - pi_star) is L_Delta-Lipschitz (operator norm) on the radius-R tube",
@@ -86,7 +86,7 @@ ASSUMPTIONS = (
     "other; held-out states unused in training; tau and class constants fixed before the data",
 )
 FORMS = ("held_out", "threshold", "expectation", "drip_shaped")
-_SOURCE = "math/tasil.md section 3 (this project's construction)"
+_SOURCE = "docs/math/tasil.md section 3 (this project's construction)"
 
 _EPS = float(np.finfo(np.float64).eps)
 # Relative upward pad of the closed forms that :func:`_up` rounds (a pad that stays, with its
@@ -143,7 +143,8 @@ def _delta_ok(delta: float) -> float:
 
 @dataclass(frozen=True)
 class TrajectoryH:
-    """``h_0`` and ``h_1`` of one expert trajectory (math/tasil.md A3; section 4 if continuous).
+    """``h_0`` and ``h_1`` of one expert trajectory (docs/math/tasil.md A3; section 4 if
+    continuous).
 
     Attributes
     ----------
@@ -192,7 +193,7 @@ def _norms(delta, jac) -> tuple[np.ndarray, np.ndarray]:
 
 def h_discrete(delta, jac) -> TrajectoryH:
     """``h_0 = max_t ||Delta(x*_t)||`` and ``h_1 = max_t ||d Delta(x*_t)||_op`` over the time steps
-    ``t = 0..T-1`` of a discrete-time expert trajectory (math/tasil.md section 3.1, A3).
+    ``t = 0..T-1`` of a discrete-time expert trajectory (docs/math/tasil.md section 3.1, A3).
 
     Parameters
     ----------
@@ -236,7 +237,8 @@ def _sound_sup(t: np.ndarray, v: np.ndarray, rate: np.ndarray, what: str) -> np.
 
 
 def h_continuous(t, delta, jac, speed, L_Delta: float) -> TrajectoryH:
-    """Sound continuous-time ``h_0``, ``h_1`` along an expert trajectory (math/tasil.md section 4).
+    """Sound continuous-time ``h_0``, ``h_1`` along an expert trajectory (docs/math/tasil.md
+    section 4).
 
     Between grid points, ``|d/dt ||d Delta(x*_t)||| <= L_Delta ||x*_dot||`` gives the sound ``h_1``;
     then ``|d/dt ||Delta(x*_t)||| <= ||d Delta(x*_t)|| ||x*_dot||``, with ``||d Delta||`` bounded on
@@ -315,7 +317,8 @@ def h_from_functions(
 
 
 def eps_star(h0, h1, gamma0, L_Delta):
-    """Smallest root ``eps*`` of ``h0 + gamma0 h1 e + (L/2) gamma0^2 e^2 = e`` (math/tasil.md 3.1).
+    """Smallest root ``eps*`` of ``h0 + gamma0 h1 e + (L/2) gamma0^2 e^2 = e``
+    (docs/math/tasil.md 3.1).
 
     Cancellation-free form ``eps* = 2 h0 / ((1 - b) + sqrt((1 - b)^2 - 2 L gamma0^2 h0))``,
     ``b = gamma0 h1``; ``inf`` where ``b >= 1`` or the discriminant is negative. Vectorised; the
@@ -343,8 +346,8 @@ def eps_star(h0, h1, gamma0, L_Delta):
 
 @dataclass(frozen=True)
 class GapLemma:
-    """Verdict of the deterministic imitation-gap lemma for one initial state (math/tasil.md 3.1;
-    section 4 in continuous time, with sups over ``[0, t)``).
+    """Verdict of the deterministic imitation-gap lemma for one initial state
+    (docs/math/tasil.md 3.1; section 4 in continuous time, with sups over ``[0, t)``).
 
     Attributes
     ----------
@@ -406,7 +409,8 @@ def imitation_gap_lemma(
     *,
     continuous: bool = False,
 ) -> GapLemma:
-    """The deterministic imitation-gap lemma (math/tasil.md section 3.1; section 4 if continuous).
+    """The deterministic imitation-gap lemma (docs/math/tasil.md section 3.1; section 4 if
+    continuous).
 
     Quarter form: if ``gamma0 h1 <= 1/4``, ``gamma0^2 L h0 <= 1/4``, ``2 h0 <= eta`` and
     ``2 gamma0 h0 <= R``, then ``max_t ||x_hat_t - x*_t|| <= 2 gamma0 h0``.
@@ -433,7 +437,7 @@ def imitation_gap_lemma(
     L = _pos("L_Delta", L_Delta, allow_zero=True)
     eta = _pos("eta", eta, allow_inf=True)
     R = _pos("R", R, allow_inf=True)
-    src = "math/tasil.md section 4" if continuous else "math/tasil.md section 3.1"
+    src = "docs/math/tasil.md section 4" if continuous else "docs/math/tasil.md section 3.1"
     b = g * h1
     q = [
         _le("tasil.quarter.h1", b, 0.25, "gamma0 h1 <= 1/4", src),
@@ -466,7 +470,7 @@ def imitation_gap_lemma(
 
 
 def clopper_pearson_upper(k: int, n: int, delta: float) -> float:
-    """One-sided Clopper-Pearson upper confidence bound (math/tasil.md 3.3 c).
+    """One-sided Clopper-Pearson upper confidence bound (docs/math/tasil.md 3.3 c).
 
     With probability ``>= 1 - delta`` over ``n`` i.i.d. Bernoulli(p) draws with ``k`` successes,
     ``p <= Beta^{-1}(1 - delta; k + 1, n - k)`` (``= 1`` when ``k = n``). At ``k = 0`` this is
@@ -505,7 +509,7 @@ def clopper_pearson_upper(k: int, n: int, delta: float) -> float:
 
 @dataclass(frozen=True)
 class ClassConstants:
-    """Class constants of the parametric bounds (math/tasil.md 3.3), fixed before the data.
+    """Class constants of the parametric bounds (docs/math/tasil.md 3.3), fixed before the data.
 
     Attributes
     ----------
@@ -541,7 +545,7 @@ class ClassConstants:
 def parametric_epsilon(
     n: int, delta: float, q: int, B_theta: float, L_theta: float, alpha: float, n_tau: int = 1
 ) -> float:
-    """``eps_j = (q log(1 + 2 B L / alpha) + log(2/delta) + log K) / n`` (math/tasil.md 3.3 a).
+    """``eps_j = (q log(1 + 2 B L / alpha) + log(2/delta) + log K) / n`` (docs/math/tasil.md 3.3 a).
 
     With probability ``>= 1 - delta`` over ``n`` training trajectories, simultaneously for
     ``j = 0, 1``: ``P_xi[h_j > tau_j + 2 alpha_j] <= eps_j``. ``K = n_tau`` is the size of the grid
@@ -563,7 +567,7 @@ def parametric_expectation(
     n_tau: int = 1,
 ) -> float:
     """``R_j(n, delta) = tau_j + (b_j / n)(2 + q log(1 + 2 B L n / b_j) + log(2/delta) + log K)``:
-    the bound ``E_xi h_j <= R_j`` of math/tasil.md 3.3 (b), with ``alpha_j = b_j / n``."""
+    the bound ``E_xi h_j <= R_j`` of docs/math/tasil.md 3.3 (b), with ``alpha_j = b_j / n``."""
     delta = _delta_ok(delta)
     body = 2.0 + q * math.log1p(2.0 * B_theta * L_theta * n / b) + math.log(2.0 / delta)
     return _up(tau + (b / n) * (body + math.log(n_tau)))
@@ -572,7 +576,8 @@ def parametric_expectation(
 def rho_tasil(
     delta: float, n: int, gamma0: float, tau0: float, constants: ClassConstants, n_tau: int = 1
 ) -> float:
-    """DRIP-shaped ``rho_TaSIL(delta, n) = (6 gamma0 / delta) R_0(n, delta/3)`` (math/tasil.md 3.4).
+    """DRIP-shaped ``rho_TaSIL(delta, n) = (6 gamma0 / delta) R_0(n, delta/3)``
+    (docs/math/tasil.md 3.4).
 
     ``O(log n / n)`` as ``n -> inf`` (for ``tau0 = 0``) and ``O(log(1/delta) / delta)`` as
     ``delta -> 0``, the shape of DRIP Theorem ``thm:TaSIL``. Valid only under the conditions that
@@ -632,7 +637,7 @@ class TasilForm:
 
 @dataclass(frozen=True)
 class TasilCertificate:
-    """The TaSIL certificate (math/tasil.md sections 3-4), labelled :data:`LABEL`.
+    """The TaSIL certificate (docs/math/tasil.md sections 3-4), labelled :data:`LABEL`.
 
     Attributes
     ----------
@@ -733,7 +738,7 @@ def _h_array(name: str, values) -> np.ndarray:
 
 
 def _grid_tau(observed: float, b: float) -> float:
-    """Smallest ``b 2^{-k/2}`` (``k < K``) ``>= observed`` (math/tasil.md 3.3, grid rule)."""
+    """Smallest ``b 2^{-k/2}`` (``k < K``) ``>= observed`` (docs/math/tasil.md 3.3, grid rule)."""
     grid = b * 2.0 ** (-0.5 * np.arange(_TAU_GRID_SIZE))
     ok = grid[grid >= observed]
     return float(ok.min()) if ok.size else math.inf
@@ -751,7 +756,7 @@ def _form_held_out(h0v, h1v, tau0, tau1, gamma0, L, eta, R, delta, cont) -> Tasi
         eps,
         delta / 2.0,
         delta / 2.0 - eps,
-        "math/tasil.md 3.3 (c)",
+        "docs/math/tasil.md 3.3 (c)",
         How.SOUND,
     )
     checks = (level, *[c for c in lem.checks if c.id.startswith("tasil.sharp")])
@@ -782,10 +787,18 @@ def _form_threshold(obs, tau, c, n, gamma0, L, eta, R, delta, cont) -> TasilForm
     lem = imitation_gap_lemma(tp0, tp1, gamma0, L, eta, R, continuous=cont)
     eps = e0 + e1
     checks = [
-        _le("tasil.threshold.train0", obs[0], t0, "max_i h0(xi_i) <= tau0", "math/tasil.md 3.3"),
-        _le("tasil.threshold.train1", obs[1], t1, "max_i h1(xi_i) <= tau1", "math/tasil.md 3.3"),
         _le(
-            "tasil.threshold.level", eps, delta / 2.0, "eps0 + eps1 <= delta/2", "math/tasil.md 3.4"
+            "tasil.threshold.train0", obs[0], t0, "max_i h0(xi_i) <= tau0", "docs/math/tasil.md 3.3"
+        ),
+        _le(
+            "tasil.threshold.train1", obs[1], t1, "max_i h1(xi_i) <= tau1", "docs/math/tasil.md 3.3"
+        ),
+        _le(
+            "tasil.threshold.level",
+            eps,
+            delta / 2.0,
+            "eps0 + eps1 <= delta/2",
+            "docs/math/tasil.md 3.4",
         ),
         *_theta_check(c),
         *[x for x in lem.checks if x.id.startswith("tasil.sharp")],
@@ -813,8 +826,20 @@ def _form_expectation(obs, tau, c, n, delta) -> TasilForm:
     R0 = parametric_expectation(n, delta, t0, c.b0, c.q, c.B_theta, c.L_theta0, K0)
     R1 = parametric_expectation(n, delta, t1, c.b1, c.q, c.B_theta, c.L_theta1, K1)
     checks = [
-        _le("tasil.expectation.train0", obs[0], t0, "max_i h0(xi_i) <= tau0", "math/tasil.md 3.3"),
-        _le("tasil.expectation.train1", obs[1], t1, "max_i h1(xi_i) <= tau1", "math/tasil.md 3.3"),
+        _le(
+            "tasil.expectation.train0",
+            obs[0],
+            t0,
+            "max_i h0(xi_i) <= tau0",
+            "docs/math/tasil.md 3.3",
+        ),
+        _le(
+            "tasil.expectation.train1",
+            obs[1],
+            t1,
+            "max_i h1(xi_i) <= tau1",
+            "docs/math/tasil.md 3.3",
+        ),
         *_theta_check(c),
     ]
     vac = R0 >= c.b0 and R1 >= c.b1
@@ -837,10 +862,10 @@ def _form_drip(obs, tau, c, n, gamma0, L, eta, R, delta) -> TasilForm:
     R1 = parametric_expectation(n, d3, t1, c.b1, c.q, c.B_theta, c.L_theta1, K1)
     m0, m1 = 3.0 / delta * R0, 3.0 / delta * R1
     rho = rho_tasil(delta, n, gamma0, t0, c, K0)
-    src = "math/tasil.md 3.4"
+    src = "docs/math/tasil.md 3.4"
     checks = [
-        _le("tasil.drip.train0", obs[0], t0, "max_i h0(xi_i) <= tau0", "math/tasil.md 3.3"),
-        _le("tasil.drip.train1", obs[1], t1, "max_i h1(xi_i) <= tau1", "math/tasil.md 3.3"),
+        _le("tasil.drip.train0", obs[0], t0, "max_i h0(xi_i) <= tau0", "docs/math/tasil.md 3.3"),
+        _le("tasil.drip.train1", obs[1], t1, "max_i h1(xi_i) <= tau1", "docs/math/tasil.md 3.3"),
         _le("tasil.drip.L", gamma0**2 * L * m0, 0.25, "gamma0^2 L_Delta (3/delta) R0 <= 1/4", src),
         _le("tasil.drip.h1", 4 * gamma0 * m1, 1.0, "4 gamma0 (3/delta) R1 <= 1", src),
         _le("tasil.drip.eta", 2 * m0, eta, "2 (3/delta) R0 <= eta", src),
@@ -878,7 +903,8 @@ def tasil_certificate(
     method: str = "tasil-1",
     continuous: bool = False,
 ) -> TasilCertificate:
-    """Build the TaSIL certificate (math/tasil.md sections 3-4; DRIP Theorem ``thm:TaSIL`` shape).
+    """Build the TaSIL certificate (docs/math/tasil.md sections 3-4; DRIP Theorem ``thm:TaSIL``
+    shape).
 
     Parameters
     ----------

@@ -7,7 +7,7 @@ Induced Imitation Gap"). In DRIP the known drift seen by the predictor INCLUDES 
 policy: ``f_known(t, x) = f(t, x) + g(t) pi_IL(x)``; the caller evaluates it once per step and
 passes it in, so the plant and the predictor share it.
 
-Discretisation (math/l1drac.md section 10), on the simulation grid ``t_j = j dt`` with
+Discretisation (docs/math/l1drac.md section 10), on the simulation grid ``t_j = j dt`` with
 ``T_s = k dt`` (``k`` a positive integer):
 
 1. if ``j > 0`` and ``j mod k == 0``: ``Lambda_hat <- lambda_s (1 - e^{lambda_s T_s})^{-1}
@@ -96,7 +96,8 @@ class L1Params:
         """``lambda_s (1 - e^{lambda_s T_s})^{-1} = -lambda_s / expm1(lambda_s T_s)`` of (15b).
 
         Equals the Hovakimyan-Cao piecewise-constant gain ``-Phi^{-1}(T_s) e^{A_s T_s}`` with
-        ``A_s = -lambda_s I`` and ``Phi(T) = A_s^{-1}(e^{A_s T} - I)`` (math/l1drac.md section 4).
+        ``A_s = -lambda_s I`` and ``Phi(T) = A_s^{-1}(e^{A_s T} - I)``
+        (docs/math/l1drac.md section 4).
         """
         return -self.lambda_s / math.expm1(self.lambda_s * self.Ts)
 

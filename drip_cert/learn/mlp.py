@@ -11,7 +11,7 @@ File format (shared by learned policies and by opaque blocks such as the paper's
   given by the caller.
 
 Only smooth activations are offered (tanh, GELU, identity): the TaSIL certificate needs a
-Lipschitz Jacobian (math/tasil.md section 5).
+Lipschitz Jacobian (docs/math/tasil.md section 5).
 """
 
 from __future__ import annotations

@@ -4,7 +4,7 @@ These are the constants of the DRIP paper's Assumption "PolicyRegularity"
 (``assmp:PolicyRegularity``): ``L_pi`` bounds the Lipschitz constant of a policy and ``L_dpi`` the
 Lipschitz constant of its Jacobian (equivalently, the second-order Taylor remainder
 ``||pi(z) - pi(z0) - dpi(z0)(z - z0)|| <= L_dpi/2 ||z - z0||^2``). For the TaSIL certificate
-(math/tasil.md section 3.1, assumption A2) ``L_Delta <= L_dpi(pi_hat) + L_dpi(pi_star)``.
+(docs/math/tasil.md section 3.1, assumption A2) ``L_Delta <= L_dpi(pi_hat) + L_dpi(pi_star)``.
 
 Network convention (:class:`drip_cert.learn.mlp.MLP`): ``z_0 = x``, ``a_k = W_k z_k + b_k``,
 ``z_{k+1} = s_k(a_k)`` where ``s_k`` is the hidden activation for ``k < L-1`` and the output

@@ -4,7 +4,7 @@
 * :func:`train_on_system` generates the expert demonstrations of DRIP Definition "Training
   Data", trains TaSIL or BC, and returns the policy as an MLP block for ``System.with_learned``;
 * :func:`tasil_section` computes the per-trajectory ``h_0, h_1`` soundly, the regularity constant
-  ``L_Delta`` with its provenance, and builds the certificate of math/tasil.md sections 3-4
+  ``L_Delta`` with its provenance, and builds the certificate of docs/math/tasil.md sections 3-4
   (this project's construction, not TaSIL's own constant).
 """
 
@@ -29,8 +29,8 @@ from drip_cert.system.system import System
 POLICY_BLOCK = "pi_il"  #: block name of a trained policy inside the System
 TAU_MARGIN = 1.25
 #: held-out thresholds tau_j = 1.25 x the training maxima of h_j: any tau computed from the training
-#: data is valid for the held-out form (math/tasil.md 3.3 c); the bare maxima are exceeded by about
-#: 1/n of fresh states, which alone spends the form's confidence budget
+#: data is valid for the held-out form (docs/math/tasil.md 3.3 c); the bare maxima are exceeded by
+#: about 1/n of fresh states, which alone spends the form's confidence budget
 
 _DEFAULTS: dict[str, Any] = {
     "method": "tasil",  # "tasil" | "bc"
@@ -315,8 +315,8 @@ def trajectory_h(s: System, demos: Demonstrations, L_Delta: float, speed_sound: 
 
     Between grid points the speed of an autonomous contracting closed loop does not grow
     (``d/dt x_dot = J x_dot`` and ``mu_2(J) < 0``), so ``||x_dot(t)|| <= ||x_dot(t_k)||`` on
-    ``[t_k, t_{k+1}]``; this makes the Lipschitz correction of math/tasil.md section 4 sound when
-    the expert contracts wherever its trajectories go (``speed_sound``: the rate holds for all
+    ``[t_k, t_{k+1}]``; this makes the Lipschitz correction of docs/math/tasil.md section 4 sound
+    when the expert contracts wherever its trajectories go (``speed_sound``: the rate holds for all
     ``x``, or on a box that contains a proved forward-invariant set around the support) and ``f``
     does not depend on ``t``. Otherwise the grid maximum of the speed is used and the result is
     labelled an estimate.
@@ -399,7 +399,7 @@ def tasil_section(
     speed_sound: bool = False,
     method: str = "tasil-1",
 ):
-    """The TaSIL certificate of ``s.learned`` (math/tasil.md sections 3-4).
+    """The TaSIL certificate of ``s.learned`` (docs/math/tasil.md sections 3-4).
 
     Parameters
     ----------
@@ -489,7 +489,7 @@ def tasil_section(
     )
     provenance["h_how"] = how_t.value
     h_note = (
-        "continuous-time sup along the expert trajectories (math/tasil.md section 4)"
+        "continuous-time sup along the expert trajectories (docs/math/tasil.md section 4)"
         if how_t == How.SOUND
         else "grid values with an unproved speed bound between grid points: an estimate"
     )
@@ -500,7 +500,7 @@ def tasil_section(
                 val,
                 inputs=[L_Delta],
                 method=how_t,
-                source="math/tasil.md (A3)",
+                source="docs/math/tasil.md (A3)",
                 note=h_note,
             )
         )
