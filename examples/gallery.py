@@ -55,8 +55,11 @@ def run_one(name: str, out: Path, quick: bool = False, seed: int = 0) -> dict:
     failing = [a.id for a in cert.assumptions if not a.holds]
     return {
         "name": name,
+        "verdict": cert.verdict.value,
+        "parts": {k: v["verdict"] for k, v in cert.part_verdicts().items()},
         "certified": cert.certified,
         "failing": failing,
+        "validation_status": big["status"],
         "validation_holds": big["holds"],
         "figure": str(out / f"{name}.png"),
     }
@@ -71,8 +74,8 @@ def main(argv: list[str] | None = None) -> int:
     for name in args.names:
         s = run_one(name, Path(args.out), quick=args.quick)
         print(
-            f"{name}: certified={s['certified']} failing={s['failing']} "
-            f"validation_holds={s['validation_holds']} figure={s['figure']}"
+            f"{name}: verdict={s['verdict']} parts={s['parts']} failing={s['failing']} "
+            f"validation={s['validation_status']} figure={s['figure']}"
         )
     return 0
 

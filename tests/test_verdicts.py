@@ -480,3 +480,16 @@ def test_certified_implies_every_link_proved(tmp_path, a, b, c, d, k, u, method,
         assert cert.contraction_expert.euclidean.rate > 0
     if method == "sampled" and cert.contraction_expert.euclidean.how == How.ESTIMATE:
         assert cert.verdict != Verdict.CERTIFIED
+
+
+def test_bundled_box_only_example(tmp_path):
+    """examples/box_only_1d: conditional as shipped; with the expert shifted by 0.3 instead of 0.4
+    the box [-0.35, 0.35] is invariant (x^3 - x + 0.3 is -0.007 at 0.35 and 0.607 at -0.35), so the
+    same box rate is justified and the verdict is certified."""
+    path = "examples/box_only_1d/box_only_1d.toml"
+    cert = certify(load_spec(path))
+    assert cert.verdict == Verdict.CONDITIONAL
+    text = open(path).read().replace("-x1 + 0.4", "-x1 + 0.3")
+    cert = certify(spec_of(tmp_path, text))
+    assert cert.verdict == Verdict.CERTIFIED, cert.verdict_reasons
+    assert cert.invariance.proved and 0.35**3 - 0.35 + 0.3 < 0 < (-0.35) ** 3 + 0.35 + 0.3
