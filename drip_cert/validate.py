@@ -39,8 +39,7 @@ The policy radius involves only the two nominal processes, which do not depend o
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -48,6 +47,7 @@ import numpy as np
 
 from drip_cert.errors import SpecError
 from drip_cert.sim import stats as _stats
+from drip_cert.system.settings import SimSettings
 from drip_cert.system.system import System
 
 MAX_STEPS = 200_000  #: largest number of Euler steps per path accepted for a certified-T_s run
@@ -57,59 +57,11 @@ MIN_SIMULABLE_TS = 1e-9
 #: below this T_s an Euler step changes an O(1) state by less than ~1e-9 relative: with float64
 #: (eps 2.2e-16) the drift of one step keeps fewer than 7 digits, and below ~1e-15 it is lost
 #: entirely, so a run at such T_s says nothing about the certificate
-PRACTICAL = {"omega": 50.0, "lambda_s": 10.0, "Ts": 0.01, "dt": 1e-3}
-#: default practical L1-DRAC parameters (those of the authors' Julia examples, T_s = 10 dt)
-SIM_KEYS = {"dt", "paths", "chunk_size", "omega", "lambda_s", "Ts", "record_every"}
 
 HOLDS = "holds"  #: a finite bound was compared and not violated at the stated confidence
 VIOLATED = "violated"  #: the one-sided lower confidence bound exceeds the bound
 NOT_CHECKED = "not_checked"  #: nothing was compared (the check's ``reason`` says why)
 NOTHING_CHECKED = "nothing_checked"  #: report status: no check holds and none is violated
-
-
-@dataclass(frozen=True)
-class SimSettings:
-    """Validated ``[simulation]`` table: practical parameters for runs that cannot use the
-    certified ones."""
-
-    dt: float = PRACTICAL["dt"]
-    paths: int = 1000
-    chunk_size: int = 2048
-    omega: float = PRACTICAL["omega"]
-    lambda_s: float = PRACTICAL["lambda_s"]
-    Ts: float = PRACTICAL["Ts"]
-    record_every: int = 10
-
-    @staticmethod
-    def from_table(table: Mapping[str, Any]) -> SimSettings:
-        extra = set(table) - SIM_KEYS
-        if extra:
-            raise SpecError(
-                f"unknown key(s) {sorted(extra)}; allowed {sorted(SIM_KEYS)}", field="simulation"
-            )
-        kw: dict[str, Any] = {}
-        for key in ("dt", "omega", "lambda_s", "Ts"):
-            if key in table:
-                v = table[key]
-                if (
-                    isinstance(v, bool)
-                    or not isinstance(v, int | float)
-                    or not v > 0
-                    or not math.isfinite(v)
-                ):
-                    raise SpecError(
-                        f"must be a finite number > 0, got {v!r}", field=f"simulation.{key}"
-                    )
-                kw[key] = float(v)
-        for key in ("paths", "chunk_size", "record_every"):
-            if key in table:
-                v = table[key]
-                if isinstance(v, bool) or not isinstance(v, int) or v < 1:
-                    raise SpecError(
-                        f"must be a positive integer, got {v!r}", field=f"simulation.{key}"
-                    )
-                kw[key] = int(v)
-        return SimSettings(**kw)
 
 
 def x0_sampler(box) -> Any:
@@ -1067,26 +1019,25 @@ def validate_spec(
     A spec without a learned policy gets one trained by TaSIL with its ``[tasil]`` settings.
     """
     from drip_cert.bounds.certificate import certify
-    from drip_cert.learn.workflow import tasil_settings, train_on_system
+    from drip_cert.learn.workflow import train_on_system
     from drip_cert.system import load_spec
-    from drip_cert.system.spec import Spec
 
     spec = load_spec(spec_path)
     s = spec.system
     notes = []
     if s.learned is None:
-        st = tasil_settings(spec.table("tasil"))
+        st = spec.settings.tasil
         if quick:
-            st = type(st)(**{**st.__dict__, "steps": min(st.steps, 300)})
+            st = replace(st, steps=min(st.steps, 300))
         tp = train_on_system(s, st, progress=progress)
         s = tp.system
         notes.append(
             f"no learned policy in the spec: trained {st.method} ({st.steps} steps, "
             f"{st.trajectories} trajectories, seed {st.seed})"
         )
-        spec = Spec(spec.path, s, spec.tables)
+        spec = spec.with_system(s)
     cert = certify(spec)
-    sim = SimSettings.from_table(spec.table("simulation"))
+    sim = spec.settings.simulation
     paths = min(trajectories, 200) if quick else trajectories
     horizon = min(s.horizon, 2.0) if quick else None
     rep = validate(

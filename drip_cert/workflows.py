@@ -55,12 +55,12 @@ def train_from_spec(
     """
     from drip_cert.learn.data import save_demonstrations
     from drip_cert.learn.tasil import evaluate_gap
-    from drip_cert.learn.workflow import nominal_field, tasil_settings, train_on_system
+    from drip_cert.learn.workflow import nominal_field, train_on_system
     from drip_cert.report import atomic_write_json
     from drip_cert.system import load_spec
 
     spec = load_spec(spec_path)
-    st = tasil_settings(spec.table("tasil"))
+    st = spec.settings.tasil
     st = dataclasses.replace(
         st, method=method, trajectories=trajectories, seed=seed, steps=steps or st.steps
     )
@@ -133,7 +133,7 @@ def reproduce(
     """``drip-cert reproduce paper-4d``; see the module docstring."""
     from drip_cert.bounds.certificate import certify
     from drip_cert.learn.tasil import evaluate_gap
-    from drip_cert.learn.workflow import nominal_field, tasil_settings, train_on_system
+    from drip_cert.learn.workflow import nominal_field, train_on_system
     from drip_cert.report import (
         atomic_write_json,
         atomic_write_text,
@@ -142,8 +142,7 @@ def reproduce(
         reproduce_markdown,
     )
     from drip_cert.system import load_spec
-    from drip_cert.system.spec import Spec
-    from drip_cert.validate import SimSettings, validate
+    from drip_cert.validate import validate
 
     t_start = time.perf_counter()
     out = Path(out)
@@ -151,7 +150,7 @@ def reproduce(
     rs = ReproduceSettings.make(quick)
     spec = load_spec(_spec_path_packaged(name))
     base = spec.system
-    st = dataclasses.replace(tasil_settings(spec.table("tasil")), steps=rs.steps, seed=seed)
+    st = dataclasses.replace(spec.settings.tasil, steps=rs.steps, seed=seed)
     timings: dict[str, float] = {}
     trained = {}
     for method in ("tasil", "bc"):
@@ -174,11 +173,11 @@ def reproduce(
         )
         heldout_gaps[method] = {"mean": float(np.mean(g)), "max": float(np.max(g))}
     t0 = time.perf_counter()
-    cert = certify(Spec(spec.path, s, spec.tables))
+    cert = certify(spec.with_system(s))
     timings["certify_s"] = time.perf_counter() - t0
     atomic_write_json(out / "certificate.json", cert.to_dict())
     atomic_write_text(out / "certificate.md", certificate_markdown(cert))
-    sim = SimSettings.from_table(spec.table("simulation"))
+    sim = spec.settings.simulation
     sim = dataclasses.replace(sim, dt=rs.dt, Ts=max(sim.Ts, 5 * rs.dt))
     runs = {}
     for label, paths in (("paper", rs.paths_paper), ("ours", rs.paths_ours)):

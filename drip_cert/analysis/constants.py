@@ -30,8 +30,8 @@ from typing import Any
 import numpy as np
 import sympy as sp
 
-from drip_cert.errors import SpecError
 from drip_cert.provenance import How, Quantity
+from drip_cert.system.settings import ConstantsTable
 from drip_cert.system.system import System
 
 SAMPLE_RADII = (0.0, 0.1, 0.3, 1.0, 3.0, 10.0, 30.0, 100.0, 1e3, 1e4, 1e6)
@@ -341,7 +341,7 @@ class UncertaintyConstants:
 
 
 def uncertainty_constants(
-    s: System, given: Mapping[str, Any] | None = None
+    s: System, given: ConstantsTable | Mapping[str, Any] | None = None
 ) -> UncertaintyConstants:
     """Estimate (or take as given) the uncertainty and diffusion constants.
 
@@ -350,10 +350,13 @@ def uncertainty_constants(
     s
         The system.
     given
-        The spec's ``[constants]`` table; any key there overrides the computed value and is
-        labelled ``given``.
+        The spec's ``[constants]`` (``spec.settings.constants``, or a plain mapping, validated
+        here the same way); any key there overrides the computed value and is labelled
+        ``given``.
     """
-    given = dict(given or {})
+    if not isinstance(given, ConstantsTable):
+        given = ConstantsTable.from_table(given)
+    given = dict(given.values)
     n, m = s.n, s.m
     times = np.array([0.0]) if not _depends_on_t(s) else np.array([0.0, float(s.horizon)])
     th = theta_ad_symbolic(s)
@@ -363,9 +366,7 @@ def uncertainty_constants(
 
     def put(name: str, value: float, how: How, source: str, nt: str, scope=None) -> None:
         if name in given:
-            out[name] = Quantity(
-                name, _given_float(given[name], name), How.GIVEN, source, "given in [constants]"
-            )
+            out[name] = Quantity(name, given[name], How.GIVEN, source, "given in [constants]")
         else:
             out[name] = Quantity.derive(
                 name, value, method=how, source=source, note=nt, scope=scope
@@ -487,14 +488,3 @@ def uncertainty_constants(
 def _depends_on_t(s: System) -> bool:
     mats = [s.diffusion, s.lambda_mu, s.lambda_sigma, s.g]
     return any(s.t in e.free_symbols for mat in mats if mat is not None for e in mat)
-
-
-def _given_float(v: Any, name: str) -> float:
-    if (
-        isinstance(v, bool)
-        or not isinstance(v, int | float)
-        or not math.isfinite(float(v))
-        or float(v) < 0
-    ):
-        raise SpecError(f"must be a finite number >= 0, got {v!r}", field=f"constants.{name}")
-    return float(v)

@@ -26,66 +26,12 @@ from drip_cert.analysis.constants import (
 )
 from drip_cert.analysis.contraction import ContractionResult
 from drip_cert.analysis.invariance import InvariantBall, best_invariant_set
-from drip_cert.errors import AssumptionViolation, DripCertError, SpecError
+from drip_cert.errors import AssumptionViolation, DripCertError
 from drip_cert.provenance import Check, How, Quantity, Scope, Verdict, json_float, verdict_of
 from drip_cert.rounding import div_up, mul_up, up
+from drip_cert.system.settings import ContractionSettings
 from drip_cert.system.spec import Spec
 from drip_cert.system.system import System
-
-CONTRACTION_KEYS = {"method", "region", "tol", "max_boxes", "metric", "max_time"}
-
-
-@dataclass(frozen=True)
-class ContractionOptions:
-    """Settings of the contraction analysis (spec table ``[contraction]``).
-
-    ``region`` defaults to the support box of ``D``; the paper asks for all ``x``, so a box result
-    is weaker and is reported as such.
-    """
-
-    method: str = "auto"
-    region: tuple[tuple[float, float], ...] | None = None
-    tol: float = 1e-3
-    max_boxes: int = 4000
-    metric: bool = True
-    max_time: float = 20.0  #: seconds of interval branch and bound per closed loop
-
-    @staticmethod
-    def from_table(table: Mapping[str, Any], n: int) -> ContractionOptions:
-        extra = set(table) - CONTRACTION_KEYS
-        if extra:
-            raise SpecError(
-                f"unknown key(s) {sorted(extra)}; allowed {sorted(CONTRACTION_KEYS)}",
-                field="contraction",
-            )
-        method = table.get("method", "auto")
-        if method not in ("auto", "exact-linear", "interval-bnb", "sampled"):
-            raise SpecError(
-                f"method {method!r} is not one of auto, exact-linear, interval-bnb, sampled",
-                field="contraction.method",
-            )
-        region = table.get("region")
-        if region is not None:
-            from drip_cert.system.system import _box
-
-            region = _box(region, n, "contraction.region")
-        tol = table.get("tol", 1e-3)
-        if isinstance(tol, bool) or not isinstance(tol, int | float) or not tol > 0:
-            raise SpecError(f"must be a number > 0, got {tol!r}", field="contraction.tol")
-        mb = table.get("max_boxes", 4000)
-        if isinstance(mb, bool) or not isinstance(mb, int) or mb < 1:
-            raise SpecError(
-                f"must be a positive integer, got {mb!r}", field="contraction.max_boxes"
-            )
-        metric = table.get("metric", True)
-        if not isinstance(metric, bool):
-            raise SpecError(f"must be true or false, got {metric!r}", field="contraction.metric")
-        mt = table.get("max_time", 20.0)
-        if isinstance(mt, bool) or not isinstance(mt, int | float) or not mt > 0:
-            raise SpecError(
-                f"must be a number of seconds > 0, got {mt!r}", field="contraction.max_time"
-            )
-        return ContractionOptions(method, region, float(tol), int(mb), metric, float(mt))
 
 
 @dataclass(frozen=True)
@@ -106,7 +52,7 @@ class ContractionAnalysis:
         return out
 
 
-def analyse_contraction(s: System, which: str, opts: ContractionOptions) -> ContractionAnalysis:
+def analyse_contraction(s: System, which: str, opts: ContractionSettings) -> ContractionAnalysis:
     """Contraction rate of the closed loop under the expert or the learned policy.
 
     Implements the check of DRIP Assumption 2 (expert) and L1-DRAC Assumption 2 (learned closed
@@ -333,22 +279,6 @@ SCHEMA_VERSION = 2
 """Version of :meth:`Certificate.to_dict`'s layout (2: ``verdict``, ``parts``, scopes)."""
 
 
-def contraction_options(spec: Spec) -> ContractionOptions:
-    """The ``[contraction]`` settings of ``spec``, with the region checked against the support."""
-    s = spec.system
-    opts = ContractionOptions.from_table(spec.table("contraction"), s.n)
-    if opts.region is not None and not Scope(opts.region).contains_box(s.support):
-        raise SpecError(
-            f"the region {[list(r) for r in opts.region]} does not contain the support "
-            f"{[list(r) for r in s.support]} of the initial law: a rate proved there says "
-            "nothing about trajectories that start outside it; give a region that contains "
-            "[initial] support",
-            field="contraction.region",
-            path=spec.path,
-        )
-    return opts
-
-
 def _rate_check(cid: str, r: Any, what: str, source: str) -> Check:
     """``mu_2 <= -lambda < 0`` for one closed loop, labelled from the rate's provenance."""
     lam = r.to_quantity()
@@ -364,7 +294,7 @@ def _rate_check(cid: str, r: Any, what: str, source: str) -> Check:
     )
 
 
-def _invariance(s: System, r: Any, opts: ContractionOptions) -> InvariantBall | None:
+def _invariance(s: System, r: Any, opts: ContractionSettings) -> InvariantBall | None:
     """A forward-invariant ball inside the box where the expert's rate is proved (None when the
     rate is global or not positive)."""
     if r.scope.all_x or not r.holds or not r.how.proved:
@@ -403,14 +333,15 @@ def certify(spec: Spec, *, tasil: Any | None = None) -> Certificate:
         ``None``.
     """
     s = spec.system
-    opts = contraction_options(spec)
-    given = spec.table("constants")
+    settings = spec.settings
+    opts = settings.contraction  # validated at load (its region contains the support)
+    given = settings.constants
     ic = input_constants(s)
     uc = uncertainty_constants(s, given)
     notes: list[str] = []
     checks: list[Check] = []
     extra_q: list[Quantity] = []
-    wants_l1 = "l1drac" in spec.tables
+    wants_l1 = "l1drac" in settings.present
 
     a1_inputs = [ic.Delta_g, uc["Delta_mu"], uc["Delta_sigma"]]
     a1_finite = all(math.isfinite(q.value) for q in a1_inputs)
@@ -506,10 +437,15 @@ def certify(spec: Spec, *, tasil: Any | None = None) -> Certificate:
         notes.append("no delta-ISS gain: the expert closed loop is not shown to contract")
 
     tasil_prov: dict[str, Any] = {}
-    if tasil is None and s.learned is not None and "tasil" in spec.tables and gamma0 is not None:
-        from drip_cert.learn.workflow import demonstrations, tasil_section, tasil_settings
+    if (
+        tasil is None
+        and s.learned is not None
+        and "tasil" in settings.present
+        and gamma0 is not None
+    ):
+        from drip_cert.learn.workflow import demonstrations, tasil_section
 
-        st = tasil_settings(spec.table("tasil"))
+        st = settings.tasil
         train = demonstrations(s, st.trajectories, st.samples, st.seed, 0)
         held = demonstrations(s, st.heldout, st.samples, st.seed, 1) if st.heldout else None
         room = math.inf if inv is None else (inv.room if inv.proved else math.inf)
@@ -565,7 +501,7 @@ def certify(spec: Spec, *, tasil: Any | None = None) -> Certificate:
             )
         l1 = l1_section(
             s,
-            spec.table("l1drac"),
+            settings.l1drac,
             given,
             lam_q,
             lam_q.scope.all_x,

@@ -23,26 +23,13 @@ from typing import Any
 
 import numpy as np
 
-from drip_cert.errors import AssumptionViolation, SpecError
+from drip_cert.errors import AssumptionViolation
 from drip_cert.provenance import How, Quantity
 from drip_cert.rounding import norm2_up, up_np
+from drip_cert.system.settings import ConstantsTable, L1Settings
 from drip_cert.system.system import System
 
-L1_KEYS = {
-    "p",
-    "lambda_s",
-    "omega",
-    "Ts",
-    "rho_r",
-    "rho_a",
-    "delta",
-    "alpha",
-    "eps_r",
-    "eps_a",
-    "p_star",
-    "lip_f",
-}
-DEFAULT_EPS = 1e-3  #: default slacks eps_r, eps_a of (16a), (16b)
+DEFAULT_EPS = L1Settings().eps_r  #: default slacks eps_r, eps_a of (16a), (16b)
 
 
 @dataclass(frozen=True)
@@ -69,28 +56,10 @@ class L1Section:
         return out
 
 
-def _num(table: Mapping[str, Any], key: str, default: Any, positive: bool = True) -> Any:
-    v = table.get(key, default)
-    if v is None:
-        return None
-    if (
-        isinstance(v, bool)
-        or not isinstance(v, int | float)
-        or not math.isfinite(float(v))
-        or (positive and not float(v) > 0)
-        or float(v) < 0
-    ):
-        raise SpecError(
-            f"must be a finite number {'> 0' if positive else '>= 0'}, got {v!r}",
-            field=f"l1drac.{key}",
-        )
-    return float(v)
-
-
 def l1_section(
     s: System,
-    table: Mapping[str, Any],
-    given: Mapping[str, Any],
+    settings: L1Settings,
+    given: ConstantsTable,
     lam: Quantity,
     global_rate: bool,
     which: str,
@@ -101,10 +70,10 @@ def l1_section(
 
     Parameters
     ----------
-    table
-        The spec's ``[l1drac]`` table.
+    settings
+        The spec's ``[l1drac]`` settings (validated at load).
     given
-        The spec's ``[constants]`` table (overrides, labelled ``given``).
+        The spec's ``[constants]`` (overrides, labelled ``given``; validated at load).
     lam
         Contraction rate of the closed loop under ``which`` policy.
     global_rate
@@ -115,17 +84,7 @@ def l1_section(
     from drip_cert.analysis.closed_loop import closed_loop_constants
     from drip_cert.bounds.l1drac import DesignRequest, L1Constants, design
 
-    extra = set(table) - L1_KEYS
-    if extra:
-        raise SpecError(
-            f"unknown key(s) {sorted(extra)}; allowed {sorted(L1_KEYS)}", field="l1drac"
-        )
-    p = table.get("p", 1)
-    if isinstance(p, bool) or not isinstance(p, int) or p < 1:
-        raise SpecError(f"must be a positive integer, got {p!r}", field="l1drac.p")
-    p_star = table.get("p_star", p)
-    if isinstance(p_star, bool) or not isinstance(p_star, int) or p_star < p:
-        raise SpecError(f"must be an integer >= p = {p}, got {p_star!r}", field="l1drac.p_star")
+    st = settings
     q: dict[str, Quantity] = {}
     if lam.value <= 0:
         return L1Section(
@@ -163,8 +122,6 @@ def l1_section(
                 "L1-DRAC Assumptions 1, 5, 6",
                 "not computed: give this constant in [constants]",
             )
-    if "Delta_star" in table:
-        raise SpecError("give Delta_star in [constants], not in [l1drac]", field="l1drac")
     alpha_default = 0.0
     alpha_note = "identity coupling D = D_bar (same initial state): W_2p = 0"
     if s.true_support is not None:
@@ -177,30 +134,24 @@ def l1_section(
     # in [l1drac] is the user's claim about D and D_bar
     q["alpha"] = Quantity.derive(
         "alpha",
-        _num(table, "alpha", alpha_default, positive=False),
-        method=How.GIVEN if "alpha" in table else How.SOUND,
+        alpha_default if st.alpha is None else st.alpha,
+        method=How.SOUND if st.alpha is None else How.GIVEN,
         source="L1-DRAC (18a)",
-        note="given in [l1drac]" if "alpha" in table else alpha_note,
+        note=alpha_note if st.alpha is None else "given in [l1drac]",
     )
     for key in ("eps_r", "eps_a"):
         # a slack of (16) is a design choice, not a claim about the system: the number the
         # design uses is exactly this one (nothing to be true or false about it)
         q[key] = Quantity.derive(
             key,
-            _num(table, key, DEFAULT_EPS),
+            getattr(st, key),
             source="L1-DRAC (16)",
-            note="design slack" + ("" if key in table else f" (default {DEFAULT_EPS})"),
+            note="design slack" + ("" if key in st.given else f" (default {DEFAULT_EPS})"),
         )
-    for name, v in given.items():
+    for name, v in given.values.items():
         if name in q:
-            if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
-                raise SpecError(f"must be a finite number, got {v!r}", field=f"constants.{name}")
-            q[name] = Quantity(name, float(v), How.GIVEN, q[name].source, "given in [constants]")
-    lip_f = table.get("lip_f")
-    if lip_f is None:
-        lip_f = math.isfinite(q["L_f"].value)
-    if not isinstance(lip_f, bool):
-        raise SpecError(f"must be true or false, got {lip_f!r}", field="l1drac.lip_f")
+            q[name] = Quantity(name, v, How.GIVEN, q[name].source, "given in [constants]")
+    lip_f = st.lip_f if st.lip_f is not None else math.isfinite(q["L_f"].value)
     bad = [k for k, v in q.items() if not math.isfinite(v.value) and not (k == "L_f" and not lip_f)]
     if bad:
         return L1Section(
@@ -212,7 +163,7 @@ def l1_section(
         )
     values = {k: v.value for k, v in q.items()}
     values["lambda"] = values.pop("lambda")
-    values.update(p_star=int(p_star), m=s.m, lip_f=bool(lip_f))
+    values.update(p_star=st.p_star, m=s.m, lip_f=bool(lip_f))
     if not lip_f:
         values["L_f"] = 0.0
     try:
@@ -220,13 +171,13 @@ def l1_section(
     except AssumptionViolation as exc:
         return L1Section(q, None, str(exc))
     req = DesignRequest(
-        p=int(p),
-        lambda_s=_num(table, "lambda_s", None),
-        omega=_num(table, "omega", None),
-        Ts=_num(table, "Ts", None),
-        rho_r=_num(table, "rho_r", None),
-        rho_a=_num(table, "rho_a", None),
-        delta=_num(table, "delta", None),
+        p=st.p,
+        lambda_s=st.lambda_s,
+        omega=st.omega,
+        Ts=st.Ts,
+        rho_r=st.rho_r,
+        rho_a=st.rho_a,
+        delta=st.delta,
     )
     d = design(consts, req)
     rows: tuple = ()

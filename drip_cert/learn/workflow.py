@@ -1,6 +1,7 @@
 """From a specification to a learned policy and its TaSIL certificate.
 
-* :func:`tasil_settings` reads the spec's ``[tasil]`` table (validated, documented defaults);
+* the ``[tasil]`` settings are :class:`~drip_cert.system.settings.TasilSettings` (validated when
+  the spec is loaded: ``spec.settings.tasil``; :func:`tasil_settings` reads a bare table);
 * :func:`train_on_system` generates the expert demonstrations of DRIP Definition "Training
   Data", trains TaSIL or BC, and returns the policy as an MLP block for ``System.with_learned``;
 * :func:`tasil_section` computes the per-trajectory ``h_0, h_1`` soundly, the regularity constant
@@ -24,6 +25,7 @@ from drip_cert.learn.mlp import MLP
 from drip_cert.provenance import How, Quantity, Scope
 from drip_cert.rounding import add_up, mul_up, spectral_norm_upper, sq_up, sqrt_up
 from drip_cert.system.blocks import mlp_block
+from drip_cert.system.settings import TasilSettings
 from drip_cert.system.system import System
 
 POLICY_BLOCK = "pi_il"  #: block name of a trained policy inside the System
@@ -32,102 +34,10 @@ TAU_MARGIN = 1.25
 #: data is valid for the held-out form (docs/math/tasil.md 3.3 c); the bare maxima are exceeded by
 #: about 1/n of fresh states, which alone spends the form's confidence budget
 
-_DEFAULTS: dict[str, Any] = {
-    "method": "tasil",  # "tasil" | "bc"
-    "order": 1,
-    "trajectories": 20,  # the paper's n
-    "heldout": 20,  # fresh expert trajectories for the held-out form (3.3 c)
-    "samples": 100,  # k of the uniform partition of [0, T]
-    "hidden": [64, 64],
-    "activation": "tanh",
-    "steps": 2000,
-    "lr": 3e-3,
-    "batch": 128,
-    "seed": 0,
-    "delta": 0.1,  # failure probability of rho_TaSIL
-    "eta": math.inf,  # local delta-ISS radius (the comparison bound is global: inf)
-    "tube_radius": math.inf,  # R of assumption A2 (global MLP bounds: inf)
-    "policy": None,  # path of a trained policy (.npz); relative to the spec
-}
 
-
-@dataclass(frozen=True)
-class TasilSettings:
-    """Validated ``[tasil]`` table (see :data:`_DEFAULTS` for the meaning and defaults)."""
-
-    method: str
-    order: int
-    trajectories: int
-    heldout: int
-    samples: int
-    hidden: tuple[int, ...]
-    activation: str
-    steps: int
-    lr: float
-    batch: int
-    seed: int
-    delta: float
-    eta: float
-    tube_radius: float
-    policy: str | None
-
-
-def tasil_settings(table: Mapping[str, Any]) -> TasilSettings:
-    """Validate the ``[tasil]`` table of a spec (unknown keys and bad values: SpecError)."""
-    extra = set(table) - set(_DEFAULTS)
-    if extra:
-        raise SpecError(
-            f"unknown key(s) {sorted(extra)}; allowed {sorted(_DEFAULTS)}", field="tasil"
-        )
-    v = {**_DEFAULTS, **dict(table)}
-    if v["method"] not in ("tasil", "bc"):
-        raise SpecError(f"must be 'tasil' or 'bc', got {v['method']!r}", field="tasil.method")
-    for key in ("order", "trajectories", "heldout", "samples", "steps", "batch"):
-        x = v[key]
-        if isinstance(x, bool) or not isinstance(x, int) or x < (0 if key == "heldout" else 1):
-            raise SpecError(f"must be a positive integer, got {x!r}", field=f"tasil.{key}")
-    if v["order"] not in (1, 2):
-        raise SpecError(f"must be 1 or 2, got {v['order']!r}", field="tasil.order")
-    hidden = v["hidden"]
-    if (
-        not isinstance(hidden, list)
-        or not hidden
-        or any(isinstance(h, bool) or not isinstance(h, int) or h < 1 for h in hidden)
-    ):
-        raise SpecError(
-            f"must be a list of positive integers, got {hidden!r}", field="tasil.hidden"
-        )
-    if v["activation"] not in ("tanh", "gelu"):
-        raise SpecError(
-            f"must be 'tanh' or 'gelu' (smooth), got {v['activation']!r}", field="tasil.activation"
-        )
-    for key in ("lr", "delta", "eta", "tube_radius"):
-        x = v[key]
-        if isinstance(x, bool) or not isinstance(x, int | float) or not x > 0 or x != x:
-            raise SpecError(f"must be a number > 0, got {x!r}", field=f"tasil.{key}")
-    if not v["delta"] < 1:
-        raise SpecError(f"must be in (0, 1), got {v['delta']!r}", field="tasil.delta")
-    if isinstance(v["seed"], bool) or not isinstance(v["seed"], int):
-        raise SpecError(f"must be an integer, got {v['seed']!r}", field="tasil.seed")
-    if v["policy"] is not None and not isinstance(v["policy"], str):
-        raise SpecError("must be a path string", field="tasil.policy")
-    return TasilSettings(
-        v["method"],
-        int(v["order"]),
-        int(v["trajectories"]),
-        int(v["heldout"]),
-        int(v["samples"]),
-        tuple(int(h) for h in hidden),
-        v["activation"],
-        int(v["steps"]),
-        float(v["lr"]),
-        int(v["batch"]),
-        int(v["seed"]),
-        float(v["delta"]),
-        float(v["eta"]),
-        float(v["tube_radius"]),
-        v["policy"],
-    )
+def tasil_settings(table: Mapping[str, Any] | None) -> TasilSettings:
+    """Validate a ``[tasil]`` table; a loaded spec already holds it as ``spec.settings.tasil``."""
+    return TasilSettings.from_table(table)
 
 
 def nominal_field(s: System):

@@ -3,8 +3,10 @@
 The format (documented in the README) has the sections ``[system]``, ``[dynamics]``,
 ``[policy]``, ``[blocks.NAME]``, ``[uncertainty]``, ``[initial]``, and the optional settings
 tables ``[constants]`` (user-given values of paper constants), ``[contraction]``,
-``[l1drac]``, ``[tasil]`` and ``[simulation]``, each validated by the module that uses it.
-Every problem is a :class:`~drip_cert.errors.SpecError` naming the file, the field and the fix.
+``[l1drac]``, ``[tasil]`` and ``[simulation]``, each read into its typed settings object of
+:mod:`drip_cert.system.settings` when the spec is loaded (``spec.settings``), so that a bad value
+or an unknown key is found before anything is computed. Every problem is a
+:class:`~drip_cert.errors.SpecError` naming the file, the field and the fix.
 """
 
 from __future__ import annotations
@@ -12,7 +14,7 @@ from __future__ import annotations
 import math
 import tomllib
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from types import MappingProxyType
 from typing import Any
@@ -22,6 +24,7 @@ import sympy as sp
 from drip_cert.errors import SpecError
 from drip_cert.system.blocks import Block, load_mlp_block
 from drip_cert.system.expr import CONSTANTS, FUNCTIONS, parse_expression
+from drip_cert.system.settings import TABLES, Settings
 from drip_cert.system.system import System
 
 SECTIONS = {
@@ -31,11 +34,12 @@ SECTIONS = {
     "blocks": None,  # table of tables, checked per block
     "uncertainty": {"drift", "diffusion", "Delta_mu", "Delta_sigma"},
     "initial": {"support", "true_support"},
-    "constants": None,  # checked by drip_cert.analysis.constants
-    "contraction": None,  # checked by drip_cert.analysis.contraction
-    "l1drac": None,  # checked by drip_cert.bounds.l1drac
-    "tasil": None,  # checked by drip_cert.bounds.tasil / drip_cert.learn
-    "simulation": None,  # checked by drip_cert.sim
+    # the settings tables: checked key by key by drip_cert.system.settings
+    "constants": None,
+    "contraction": None,
+    "l1drac": None,
+    "tasil": None,
+    "simulation": None,
 }
 BLOCK_KEYS = {"kind", "weights", "inputs", "outputs", "activation"}
 REQUIRED = {
@@ -48,16 +52,38 @@ REQUIRED = {
 
 @dataclass(frozen=True, eq=False)
 class Spec:
-    """A loaded specification: the :class:`System` plus the raw settings tables."""
+    """A loaded specification: the :class:`System`, the raw settings tables and their typed,
+    validated form ``settings`` (built from ``tables`` when not given)."""
 
     path: Path | None
     system: System
     tables: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)
+    settings: Settings = None  # type: ignore[assignment]  # built in __post_init__
+
+    def __post_init__(self) -> None:
+        if self.settings is None:
+            settings = Settings.from_tables(
+                self.tables,
+                self.system.n,
+                path=None if self.path is None else str(self.path),
+                support=self.system.support,
+            )
+            object.__setattr__(self, "settings", settings)
 
     def table(self, name: str) -> Mapping[str, Any]:
-        """A settings table (``constants``, ``contraction``, ``l1drac``, ``tasil``,
-        ``simulation``); empty when absent."""
+        """A raw settings table (``constants``, ``contraction``, ``l1drac``, ``tasil``,
+        ``simulation``); empty when absent. Prefer the typed ``settings``."""
         return self.tables.get(name, MappingProxyType({}))
+
+    def with_system(self, system: System) -> Spec:
+        """The same spec (file, tables, settings) with another system (e.g. with a learned
+        policy); the state dimension and the support must not change."""
+        if system.n != self.system.n or tuple(system.support) != tuple(self.system.support):
+            raise SpecError(
+                "with_system keeps the settings of the spec: the new system must have the same "
+                "states and support"
+            )
+        return replace(self, system=system)
 
     @property
     def base_dir(self) -> Path:
@@ -294,12 +320,9 @@ def spec_from_dict(doc: Mapping[str, Any], path: Path | None = None) -> Spec:
         )
     except SpecError as exc:
         raise SpecError(str(exc), path=spath) from None
-    tables = {
-        k: MappingProxyType(dict(doc[k]))
-        for k in ("constants", "contraction", "l1drac", "tasil", "simulation")
-        if k in doc
-    }
-    return Spec(path=path, system=system, tables=MappingProxyType(tables))
+    tables = MappingProxyType({k: MappingProxyType(dict(doc[k])) for k in TABLES if k in doc})
+    settings = Settings.from_tables(tables, n, path=spath, support=system.support)
+    return Spec(path=path, system=system, tables=tables, settings=settings)
 
 
 def _names(val: Any, fld: str, err) -> list[str]:

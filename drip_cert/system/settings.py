@@ -1,0 +1,699 @@
+"""Typed settings of a specification: one frozen object per settings table, validated at load.
+
+:func:`~drip_cert.system.spec.load_spec` builds a :class:`Settings` from the optional tables
+
+* ``[contraction]`` -> :class:`ContractionSettings` (the contraction analysis),
+* ``[l1drac]`` -> :class:`L1Settings` (the L1-DRAC design inputs),
+* ``[tasil]`` -> :class:`TasilSettings` (training and the TaSIL certificate),
+* ``[simulation]`` -> :class:`SimSettings` (practical parameters of the Monte Carlo),
+* ``[constants]`` -> :class:`ConstantsTable` (user-given values of paper constants),
+
+so that ``drip-cert check-spec`` rejects every bad value and every unknown key before anything is
+computed. Each class holds the ONE set of defaults of its table (the dataclass defaults) and
+reads its table with the small typed field readers of this module; every error is a
+:class:`~drip_cert.errors.SpecError` naming the file, ``table.key`` as written in the spec, the
+value, what is allowed and the fix (the default, a "did you mean" for a misspelt key).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import difflib
+import json
+import math
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from types import MappingProxyType
+from typing import Any
+
+from drip_cert.errors import SpecError
+from drip_cert.provenance import Scope
+
+TABLES = ("constants", "contraction", "l1drac", "tasil", "simulation")
+"""The settings tables of a spec, in the order of the README."""
+
+CONSTANT_NAMES: tuple[str, ...] = (
+    "lambda",
+    "Delta_f",
+    "Delta_p",
+    "L_p",
+    "L_p_hat",
+    "Delta_g",
+    "Delta_g_dot",
+    "Delta_g_perp",
+    "Delta_Theta",
+    "Delta_star",
+    "Delta_mu",
+    "Delta_sigma",
+    "Delta_mu_par",
+    "Delta_mu_perp",
+    "Delta_sigma_par",
+    "Delta_sigma_perp",
+    "Delta_p_par",
+    "Delta_p_perp",
+    "L_p_par",
+    "L_p_perp",
+    "L_p_par_hat",
+    "L_p_perp_hat",
+    "L_mu",
+    "L_mu_hat",
+    "L_mu_par",
+    "L_mu_par_hat",
+    "L_mu_perp",
+    "L_mu_perp_hat",
+    "L_sigma",
+    "L_sigma_hat",
+    "L_sigma_par",
+    "L_sigma_par_hat",
+    "L_sigma_perp",
+    "L_sigma_perp_hat",
+    "L_f",
+    "alpha",
+    "eps_r",
+    "eps_a",
+)
+"""The keys of ``[constants]``: every real constant of L1-DRAC Assumptions 1-8 and (16), (18a)
+that the certificate computes (the names of ``drip_cert.bounds.l1drac``'s constants table)."""
+
+POSITIVE_CONSTANTS = frozenset({"lambda", "eps_r", "eps_a"})
+"""Constants that must be > 0 (a contraction rate, the slacks of (16)); the others bound norms
+and must be >= 0."""
+
+_ELSEWHERE = {
+    "p_star": "p_star is a design input: give it in [l1drac]",
+    "lip_f": "lip_f is a design input: give it in [l1drac]",
+    "m": "m is the number of columns of [dynamics] g, not a setting",
+}
+
+
+# ------------------------------------------------------------------------------ field readers
+def toml_text(value: Any) -> str:
+    """``value`` as it would be written in TOML (for messages)."""
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, str):
+        return json.dumps(value)
+    if isinstance(value, float):
+        if math.isnan(value):
+            return "nan"
+        if math.isinf(value):
+            return "inf" if value > 0 else "-inf"
+        return repr(value)
+    if isinstance(value, Mapping):
+        return "{ " + ", ".join(f"{k} = {toml_text(v)}" for k, v in value.items()) + " }"
+    if isinstance(value, list | tuple):
+        return "[" + ", ".join(toml_text(v) for v in value) + "]"
+    return repr(value)
+
+
+_NO_DEFAULT = object()
+
+
+@dataclass(frozen=True)
+class Field:
+    """One ``table.key`` of a spec: where it is and what it means (for error messages)."""
+
+    table: str
+    key: str
+    path: str | None = None
+    meaning: str = ""
+    default: Any = _NO_DEFAULT
+    example: Any = None
+
+    @property
+    def name(self) -> str:
+        return f"{self.table}.{self.key}"
+
+    def error(self, value: Any, rule: str, fix: str = "") -> SpecError:
+        """``SpecError``: the value as written, the rule it breaks (with the key's meaning) and
+        the fix (``fix``, else the default, else an example)."""
+        what = f"{self.key} ({self.meaning})" if self.meaning else self.key
+        msg = f"{self.key} = {toml_text(value)} is not allowed: {what} must be {rule}"
+        if not fix:
+            if self.default is not _NO_DEFAULT and self.default is not None:
+                fix = (
+                    f"write e.g. {self.key} = {toml_text(self.default)} "
+                    "(the default), or remove the key"
+                )
+            elif self.example is not None:
+                fix = f"write e.g. {self.key} = {toml_text(self.example)}, or remove the key"
+            else:
+                fix = "correct the value or remove the key"
+        return SpecError(f"{msg}; {fix}", field=self.name, path=self.path)
+
+
+def _is_number(value: Any) -> bool:
+    return isinstance(value, int | float) and not isinstance(value, bool)
+
+
+def read_real(
+    value: Any,
+    f: Field,
+    rule: str,
+    ok: Callable[[float], bool],
+    *,
+    allow_inf: bool = False,
+) -> float:
+    """A real number (a TOML integer or float, never a boolean, never NaN; ``+inf`` only when
+    ``allow_inf``) for which ``ok`` holds; ``rule`` says what is allowed."""
+    if not _is_number(value):
+        raise f.error(value, rule)
+    x = float(value)
+    if math.isnan(x) or (math.isinf(x) and not (allow_inf and x > 0)) or not ok(x):
+        raise f.error(value, rule)
+    return x
+
+
+def positive_float(value: Any, f: Field) -> float:
+    """A finite number > 0."""
+    return read_real(value, f, "a finite number > 0", lambda x: x > 0)
+
+
+def positive_or_inf(value: Any, f: Field) -> float:
+    """A number > 0, ``inf`` allowed (a radius or a time limit that may be absent)."""
+    return read_real(value, f, "a number > 0 (inf allowed)", lambda x: x > 0, allow_inf=True)
+
+
+def nonneg_float(value: Any, f: Field) -> float:
+    """A finite number >= 0."""
+    return read_real(value, f, "a finite number >= 0", lambda x: x >= 0)
+
+
+def probability(value: Any, f: Field) -> float:
+    """A probability in the open interval (0, 1)."""
+    return read_real(value, f, "a number in (0, 1)", lambda x: 0 < x < 1)
+
+
+def integer(value: Any, f: Field, *, minimum: int | None = None, rule: str = "") -> int:
+    """A TOML integer (not a float, not a boolean), at least ``minimum``; ``rule`` replaces
+    the generated description of what is allowed."""
+    if not rule:
+        if minimum == 1:
+            rule = "a positive integer"
+        elif minimum == 0:
+            rule = "an integer >= 0"
+        elif minimum is not None:
+            rule = f"an integer >= {minimum}"
+        else:
+            rule = "an integer"
+    if isinstance(value, bool) or not isinstance(value, int):
+        raise f.error(value, rule)
+    if minimum is not None and value < minimum:
+        raise f.error(value, rule)
+    return int(value)
+
+
+def positive_int(value: Any, f: Field) -> int:
+    """An integer >= 1."""
+    return integer(value, f, minimum=1)
+
+
+def nonneg_int(value: Any, f: Field) -> int:
+    """An integer >= 0."""
+    return integer(value, f, minimum=0)
+
+
+def boolean(value: Any, f: Field) -> bool:
+    """``true`` or ``false``."""
+    if not isinstance(value, bool):
+        raise f.error(value, "true or false")
+    return value
+
+
+def one_of(value: Any, f: Field, choices: Sequence[Any]) -> Any:
+    """One of ``choices`` (strings or integers; booleans never match integers)."""
+    ok = any(type(value) is type(c) and value == c for c in choices)
+    if not ok:
+        raise f.error(value, "one of " + ", ".join(toml_text(c) for c in choices))
+    return value
+
+
+def string(value: Any, f: Field) -> str:
+    """A non-empty string."""
+    if not isinstance(value, str) or not value.strip():
+        raise f.error(value, "a non-empty string")
+    return value
+
+
+def int_list(value: Any, f: Field) -> tuple[int, ...]:
+    """A non-empty list of positive integers."""
+    if (
+        not isinstance(value, list)
+        or not value
+        or any(isinstance(h, bool) or not isinstance(h, int) or h < 1 for h in value)
+    ):
+        raise f.error(value, "a non-empty list of positive integers")
+    return tuple(int(h) for h in value)
+
+
+def box(value: Any, f: Field, n: int) -> tuple[tuple[float, float], ...]:
+    """A box ``[[lo_1, hi_1], ..., [lo_n, hi_n]]`` of finite numbers with ``lo_i <= hi_i``."""
+    rule = f"a list of {n} pairs [lo, hi] of finite numbers with lo <= hi (one per state)"
+    if not isinstance(value, list) or len(value) != n:
+        raise f.error(value, rule)
+    out = []
+    for i, pair in enumerate(value):
+        if not isinstance(pair, list) or len(pair) != 2:
+            raise f.error(value, rule, f"entry {i} is not a pair [lo, hi]")
+        for v in pair:
+            if not _is_number(v) or not math.isfinite(float(v)):
+                raise f.error(
+                    value, rule, f"bound {toml_text(v)} of state {i} is not a finite number"
+                )
+        lo, hi = float(pair[0]), float(pair[1])
+        if lo > hi:
+            raise f.error(value, rule, f"interval {i} is empty (lo = {lo:g} > hi = {hi:g})")
+        out.append((lo, hi))
+    return tuple(out)
+
+
+class TableReader:
+    """Reads one settings table: rejects unknown keys (with a "did you mean"), then reads each
+    key with a typed field reader, falling back to the default when the key is absent.
+
+    Parameters
+    ----------
+    name
+        The table's name (``simulation``).
+    table
+        Its contents as parsed from TOML (``None``: absent).
+    keys
+        Every allowed key with its meaning (used in messages).
+    path
+        The spec file, for messages.
+    elsewhere
+        Keys that belong in another table or nowhere, with the message to give.
+    """
+
+    def __init__(
+        self,
+        name: str,
+        table: Mapping[str, Any] | None,
+        keys: Mapping[str, str],
+        path: str | None = None,
+        elsewhere: Mapping[str, str] | None = None,
+    ) -> None:
+        self.name = name
+        self.path = None if path is None else str(path)
+        self.keys = keys
+        if table is None:
+            table = {}
+        if not isinstance(table, Mapping):
+            raise SpecError(
+                f"[{name}] must be a table of key = value pairs, got {toml_text(table)}",
+                field=name,
+                path=self.path,
+            )
+        self.table = table
+        for key in table:
+            if key not in keys:
+                raise self._unknown(str(key), elsewhere or {})
+
+    def _unknown(self, key: str, elsewhere: Mapping[str, str]) -> SpecError:
+        allowed = ", ".join(self.keys)
+        if key in elsewhere:
+            msg = f"{key} is not a key of [{self.name}]: {elsewhere[key]}."
+        else:
+            close = difflib.get_close_matches(key, list(self.keys), n=3, cutoff=0.6)
+            msg = f"unknown key {key} (= {toml_text(self.table[key])}) in [{self.name}]"
+            if close:
+                msg += ". Did you mean " + " or ".join(close) + "?"
+            else:
+                msg += "."
+        return SpecError(
+            f"{msg} Allowed keys: {allowed}", field=f"{self.name}.{key}", path=self.path
+        )
+
+    @property
+    def given(self) -> frozenset[str]:
+        """The keys the spec writes."""
+        return frozenset(self.table)
+
+    def field_of(self, key: str, default: Any = _NO_DEFAULT, example: Any = None) -> Field:
+        return Field(self.name, key, self.path, self.keys.get(key, ""), default, example)
+
+    def get(self, key: str, read: Callable[..., Any], default: Any, *args: Any, **kw: Any) -> Any:
+        """``read(value, field, *args, **kw)`` when ``key`` is written, else ``default``."""
+        if key not in self.table:
+            return default
+        return read(
+            self.table[key], self.field_of(key, default, kw.pop("example", None)), *args, **kw
+        )
+
+
+def _defaults(cls: type) -> dict[str, Any]:
+    """The dataclass defaults of a settings class: its ONE set of defaults."""
+    return {f.name: f.default for f in dataclasses.fields(cls) if f.name != "given"}
+
+
+# ------------------------------------------------------------------------------ [contraction]
+CONTRACTION_METHODS = ("auto", "exact-linear", "interval-bnb", "sampled")
+
+
+@dataclass(frozen=True)
+class ContractionSettings:
+    """``[contraction]``: settings of the contraction analysis.
+
+    ``region`` defaults to the support box of ``D`` (``None``); the paper asks for all ``x``, so
+    a box result is weaker and is reported as such. A region must contain the support.
+    """
+
+    method: str = "auto"
+    region: tuple[tuple[float, float], ...] | None = None
+    tol: float = 1e-3
+    max_boxes: int = 4000
+    metric: bool = True
+    max_time: float = 20.0  #: seconds of interval branch and bound per closed loop
+    given: frozenset[str] = field(default=frozenset(), compare=False, repr=False)
+
+    KEYS = MappingProxyType(
+        {
+            "method": "how the contraction rate is obtained",
+            "region": "box where the rate is proved; default the support of [initial]",
+            "tol": "gap between the upper and lower bound of the interval branch and bound",
+            "max_boxes": "largest number of boxes of the interval branch and bound",
+            "metric": "also search an LMI contraction metric",
+            "max_time": "seconds of branch and bound per closed loop",
+        }
+    )
+
+    @classmethod
+    def from_table(
+        cls,
+        table: Mapping[str, Any] | None,
+        n: int | None = None,
+        path: str | None = None,
+        support: Sequence[Sequence[float]] | None = None,
+    ) -> ContractionSettings:
+        """Validate ``[contraction]`` (``n``: the state dimension, needed for ``region``;
+        ``support``: the support of ``D``, which the region must contain)."""
+        r = TableReader("contraction", table, cls.KEYS, path)
+        d = _defaults(cls)
+        region = None
+        if "region" in r.table:
+            if n is None:
+                raise SpecError(
+                    "the region needs the state dimension", field="contraction.region", path=path
+                )
+            region = r.get("region", box, None, n)
+            if support is not None and not Scope(region).contains_box(support):
+                raise r.field_of("region").error(
+                    r.table["region"],
+                    "a box that contains the support of the initial law",
+                    f"the region does not contain the support {[list(x) for x in support]} of "
+                    "the initial law: a rate proved there says nothing about trajectories that "
+                    "start outside it; give a region that contains [initial] support",
+                )
+        return cls(
+            method=r.get("method", one_of, d["method"], CONTRACTION_METHODS),
+            region=region,
+            tol=r.get("tol", positive_float, d["tol"]),
+            max_boxes=r.get("max_boxes", positive_int, d["max_boxes"]),
+            metric=r.get("metric", boolean, d["metric"]),
+            max_time=r.get("max_time", positive_or_inf, d["max_time"]),
+            given=r.given,
+        )
+
+
+# ------------------------------------------------------------------------------ [l1drac]
+@dataclass(frozen=True)
+class L1Settings:
+    """``[l1drac]``: the user's inputs of the L1-DRAC design (L1-DRAC Sec. 3.2).
+
+    ``None`` means "let the designer find it" (``lambda_s``, ``omega``, ``Ts``, ``rho_r``,
+    ``rho_a``), "no kappa" (``delta``), "the distance of the supports of D and D_bar"
+    (``alpha``) or "Assumption 8 holds when L_f is finite" (``lip_f``). ``p_star`` defaults to
+    ``p``.
+    """
+
+    p: int = 1
+    p_star: int | None = None
+    lambda_s: float | None = None
+    omega: float | None = None
+    Ts: float | None = None
+    rho_r: float | None = None
+    rho_a: float | None = None
+    delta: float | None = None
+    alpha: float | None = None
+    eps_r: float = 1e-3  #: slack of (16a)
+    eps_a: float = 1e-3  #: slack of (16b)
+    lip_f: bool | None = None
+    given: frozenset[str] = field(default=frozenset(), compare=False, repr=False)
+
+    KEYS = MappingProxyType(
+        {
+            "p": "moment order of the bound, an integer >= 1",
+            "p_star": "highest moment order of L1-DRAC Assumption 1, an integer >= p",
+            "lambda_s": "predictor pole (15c)",
+            "omega": "filter bandwidth (15a)",
+            "Ts": "sampling period (15b)",
+            "rho_r": "radius of (16a)",
+            "rho_a": "radius of (16b)",
+            "delta": "violation probability of kappa (130a)",
+            "alpha": "initial distance W_2p of (18a)",
+            "eps_r": "slack of (16a)",
+            "eps_a": "slack of (16b)",
+            "lip_f": "whether L1-DRAC Assumption 8 is used",
+        }
+    )
+
+    def __post_init__(self) -> None:
+        if self.p_star is None:
+            object.__setattr__(self, "p_star", self.p)
+
+    @classmethod
+    def from_table(
+        cls, table: Mapping[str, Any] | None, n: int | None = None, path: str | None = None
+    ) -> L1Settings:
+        """Validate ``[l1drac]`` (``n`` is unused; the same signature as the other tables)."""
+        elsewhere = {
+            c: f"{c} is a paper constant: give it in [constants]"
+            for c in CONSTANT_NAMES
+            if c not in cls.KEYS
+        }
+        r = TableReader("l1drac", table, cls.KEYS, path, elsewhere)
+        d = _defaults(cls)
+        p = r.get("p", positive_int, d["p"])
+        p_star = r.get("p_star", integer, p, minimum=p, rule=f"an integer >= p = {p}")
+        kw: dict[str, Any] = {}
+        for key, example in (
+            ("lambda_s", 10.0),
+            ("omega", 50.0),
+            ("Ts", 1e-3),
+            ("rho_r", 1.0),
+            ("rho_a", 1.0),
+        ):
+            kw[key] = r.get(key, positive_float, None, example=example)
+        return cls(
+            p=p,
+            p_star=p_star,
+            delta=r.get("delta", probability, None, example=0.05),
+            alpha=r.get("alpha", nonneg_float, None, example=0.0),
+            eps_r=r.get("eps_r", positive_float, d["eps_r"]),
+            eps_a=r.get("eps_a", positive_float, d["eps_a"]),
+            lip_f=r.get("lip_f", boolean, None, example=True),
+            given=r.given,
+            **kw,
+        )
+
+
+# ------------------------------------------------------------------------------ [tasil]
+@dataclass(frozen=True)
+class TasilSettings:
+    """``[tasil]``: training of the learned policy and the TaSIL certificate."""
+
+    method: str = "tasil"  #: "tasil" | "bc"
+    order: int = 1  #: derivative order of the TaSIL loss (1 or 2)
+    trajectories: int = 20  #: the paper's n
+    heldout: int = 20  #: fresh expert trajectories for the held-out form (3.3 c); 0: none
+    samples: int = 100  #: k of the uniform partition of [0, T]
+    hidden: tuple[int, ...] = (64, 64)
+    activation: str = "tanh"
+    steps: int = 2000
+    lr: float = 3e-3
+    batch: int = 128
+    seed: int = 0
+    delta: float = 0.1  #: failure probability of rho_TaSIL
+    eta: float = math.inf  #: local delta-ISS radius (the comparison bound is global: inf)
+    tube_radius: float = math.inf  #: R of assumption A2 (global MLP bounds: inf)
+    policy: str | None = None  #: path of a trained policy (.npz); relative to the spec
+    given: frozenset[str] = field(default=frozenset(), compare=False, repr=False)
+
+    KEYS = MappingProxyType(
+        {
+            "method": "the training loss",
+            "order": "derivative order of the TaSIL loss",
+            "trajectories": "number n of expert demonstrations",
+            "heldout": "fresh expert trajectories for the held-out form; 0 for none",
+            "samples": "samples k per trajectory on [0, T]",
+            "hidden": "hidden layer widths of the policy MLP",
+            "activation": "activation of the policy MLP (smooth)",
+            "steps": "training steps",
+            "lr": "learning rate",
+            "batch": "batch size",
+            "seed": "random seed",
+            "delta": "failure probability of rho_TaSIL",
+            "eta": "local delta-ISS radius",
+            "tube_radius": "radius R of assumption A2",
+            "policy": "path of a trained policy (.npz), relative to the spec",
+        }
+    )
+
+    @classmethod
+    def from_table(
+        cls, table: Mapping[str, Any] | None, n: int | None = None, path: str | None = None
+    ) -> TasilSettings:
+        """Validate ``[tasil]`` (``n`` is unused; the same signature as the other tables)."""
+        r = TableReader("tasil", table, cls.KEYS, path)
+        d = _defaults(cls)
+        return cls(
+            method=r.get("method", one_of, d["method"], ("tasil", "bc")),
+            order=r.get("order", one_of, d["order"], (1, 2)),
+            trajectories=r.get("trajectories", positive_int, d["trajectories"]),
+            heldout=r.get("heldout", nonneg_int, d["heldout"]),
+            samples=r.get("samples", positive_int, d["samples"]),
+            hidden=r.get("hidden", int_list, d["hidden"]),
+            activation=r.get("activation", one_of, d["activation"], ("tanh", "gelu")),
+            steps=r.get("steps", positive_int, d["steps"]),
+            lr=r.get("lr", positive_float, d["lr"]),
+            batch=r.get("batch", positive_int, d["batch"]),
+            seed=r.get("seed", integer, d["seed"]),
+            delta=r.get("delta", probability, d["delta"]),
+            eta=r.get("eta", positive_or_inf, d["eta"]),
+            tube_radius=r.get("tube_radius", positive_or_inf, d["tube_radius"]),
+            policy=r.get("policy", string, d["policy"], example="policy.npz"),
+            given=r.given,
+        )
+
+
+# ------------------------------------------------------------------------------ [simulation]
+@dataclass(frozen=True)
+class SimSettings:
+    """``[simulation]``: practical parameters for Monte-Carlo runs that cannot use the certified
+    ones. The L1-DRAC defaults are those of the authors' Julia examples (``T_s = 10 dt``)."""
+
+    dt: float = 1e-3
+    paths: int = 1000
+    chunk_size: int = 2048
+    omega: float = 50.0
+    lambda_s: float = 10.0
+    Ts: float = 0.01
+    record_every: int = 10
+    given: frozenset[str] = field(default=frozenset(), compare=False, repr=False)
+
+    KEYS = MappingProxyType(
+        {
+            "dt": "Euler time step of the Monte Carlo",
+            "paths": "number of simulated paths",
+            "chunk_size": "paths simulated at once",
+            "omega": "practical filter bandwidth of L1-DRAC",
+            "lambda_s": "practical predictor pole of L1-DRAC",
+            "Ts": "practical sampling period of L1-DRAC",
+            "record_every": "record the state every this many steps",
+        }
+    )
+
+    @classmethod
+    def from_table(
+        cls, table: Mapping[str, Any] | None, n: int | None = None, path: str | None = None
+    ) -> SimSettings:
+        """Validate ``[simulation]`` (``n`` is unused; the same signature as the other tables)."""
+        r = TableReader("simulation", table, cls.KEYS, path)
+        d = _defaults(cls)
+        return cls(
+            dt=r.get("dt", positive_float, d["dt"]),
+            paths=r.get("paths", positive_int, d["paths"]),
+            chunk_size=r.get("chunk_size", positive_int, d["chunk_size"]),
+            omega=r.get("omega", positive_float, d["omega"]),
+            lambda_s=r.get("lambda_s", positive_float, d["lambda_s"]),
+            Ts=r.get("Ts", positive_float, d["Ts"]),
+            record_every=r.get("record_every", positive_int, d["record_every"]),
+            given=r.given,
+        )
+
+
+# ------------------------------------------------------------------------------ [constants]
+@dataclass(frozen=True)
+class ConstantsTable:
+    """``[constants]``: values of paper constants the user knows better than the computed ones
+    (labelled ``given`` in the certificate). Keys are :data:`CONSTANT_NAMES`; every value is a
+    finite number >= 0 (> 0 for :data:`POSITIVE_CONSTANTS`)."""
+
+    values: Mapping[str, float] = field(default_factory=lambda: MappingProxyType({}))
+
+    KEYS = MappingProxyType(
+        dict.fromkeys(CONSTANT_NAMES, "a constant of the papers; without this key it is computed")
+    )
+
+    @classmethod
+    def from_table(
+        cls, table: Mapping[str, Any] | None, n: int | None = None, path: str | None = None
+    ) -> ConstantsTable:
+        """Validate ``[constants]`` (``n`` is unused; the same signature as the other tables)."""
+        r = TableReader("constants", table, cls.KEYS, path, _ELSEWHERE)
+        values = {}
+        for key in r.table:
+            read = positive_float if key in POSITIVE_CONSTANTS else nonneg_float
+            values[key] = r.get(key, read, None)
+        return cls(MappingProxyType(values))
+
+
+# ------------------------------------------------------------------------------ all of them
+@dataclass(frozen=True)
+class Settings:
+    """The validated settings tables of a spec; ``present`` names the tables the spec writes
+    (``[l1drac]`` and ``[tasil]`` also ask ``certify`` for those parts)."""
+
+    contraction: ContractionSettings = ContractionSettings()
+    l1drac: L1Settings = L1Settings()
+    tasil: TasilSettings = TasilSettings()
+    simulation: SimSettings = SimSettings()
+    constants: ConstantsTable = ConstantsTable()
+    present: frozenset[str] = frozenset()
+
+    @classmethod
+    def from_tables(
+        cls,
+        tables: Mapping[str, Mapping[str, Any]],
+        n: int,
+        path: str | None = None,
+        support: Sequence[Sequence[float]] | None = None,
+    ) -> Settings:
+        """Validate every settings table of a spec (absent tables: the defaults)."""
+        path = None if path is None else str(path)
+        return cls(
+            contraction=ContractionSettings.from_table(
+                tables.get("contraction"), n, path, support=support
+            ),
+            l1drac=L1Settings.from_table(tables.get("l1drac"), n, path),
+            tasil=TasilSettings.from_table(tables.get("tasil"), n, path),
+            simulation=SimSettings.from_table(tables.get("simulation"), n, path),
+            constants=ConstantsTable.from_table(tables.get("constants"), n, path),
+            present=frozenset(k for k in TABLES if k in tables),
+        )
+
+
+__all__ = [
+    "CONSTANT_NAMES",
+    "ConstantsTable",
+    "ContractionSettings",
+    "Field",
+    "L1Settings",
+    "Settings",
+    "SimSettings",
+    "TableReader",
+    "TasilSettings",
+    "boolean",
+    "box",
+    "int_list",
+    "integer",
+    "nonneg_float",
+    "nonneg_int",
+    "one_of",
+    "positive_float",
+    "positive_int",
+    "positive_or_inf",
+    "probability",
+    "read_real",
+    "string",
+]
