@@ -493,3 +493,13 @@ def test_bundled_box_only_example(tmp_path):
     cert = certify(spec_of(tmp_path, text))
     assert cert.verdict == Verdict.CERTIFIED, cert.verdict_reasons
     assert cert.invariance.proved and 0.35**3 - 0.35 + 0.3 < 0 < (-0.35) ** 3 + 0.35 + 0.3
+
+
+def test_support_box_invariant_with_zero_room():
+    """nonlinear_2d: the rate's box is the support itself, proved invariant by Nagumo's condition;
+    its room is exactly 0 (not -5e-324 from rounding an exact 0 down), so the expert's use of the
+    rate is justified but no TaSIL tube would fit."""
+    cert = certify(load_spec("examples/nonlinear_2d/nonlinear_2d.toml"))
+    inv = cert.invariance
+    assert inv.proved and inv.room == 0.0 and "Nagumo" in inv.reason
+    assert cert.verdict == Verdict.CERTIFIED

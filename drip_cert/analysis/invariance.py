@@ -49,7 +49,7 @@ from drip_cert.analysis.interval import UnsupportedExpression, enclose_expr
 from drip_cert.provenance import Scope
 from drip_cert.rounding import add_up, div_up, down, sq_up, sqrt_up, sum_sq_up, up
 
-__all__ = ["InvariantBall", "best_invariant_set", "invariant_ball", "invariant_box"]
+__all__ = ["InvariantSet", "best_invariant_set", "invariant_ball", "invariant_box"]
 
 #: subintervals of the time range over which ||F(t, x_0)|| is enclosed (a t-dependent field)
 TIME_PIECES = 64
@@ -58,20 +58,22 @@ FACE_SPLITS = 256
 
 
 @dataclass(frozen=True)
-class InvariantBall:
-    """The ball ``{||x - centre|| <= radius}``, forward invariant, inside the box of the rate.
+class InvariantSet:
+    """A forward-invariant set inside the box of the rate: the ball
+    ``{||x - centre|| <= radius}`` (:func:`invariant_ball`) or a box (:func:`invariant_box`; then
+    ``centre`` is empty and ``radius``, ``eps`` are NaN, the box is named in ``reason``).
 
     Attributes
     ----------
     proved
-        Whether the ball is proved forward invariant and to contain the support (``room > 0``).
+        Whether the set is proved forward invariant and to contain the support (``room > 0``).
     centre, radius
         The ball (``radius`` rounded up).
     eps
         Rigorous upper bound of ``sup_t ||F(t, centre)||``.
     room
-        Distance from the ball to the boundary of the box (rounded down; ``<= 0`` when the ball
-        does not fit). A trajectory that stays within ``G < room`` of one in the ball never
+        Distance from the set to the boundary of the box (rounded down; ``<= 0`` when the set
+        does not fit). A trajectory that stays within ``G < room`` of one in the set never
         leaves the box.
     reason
         Why the proof holds or what failed.
@@ -121,7 +123,7 @@ def invariant_ball(
     horizon: float,
     F_num,
     enclose=None,
-) -> InvariantBall:
+) -> InvariantSet:
     """Prove a forward-invariant ball containing ``support`` inside ``scope.box``.
 
     Parameters
@@ -146,12 +148,12 @@ def invariant_ball(
     support = np.asarray(support, dtype=float)
     n = support.shape[0]
     if scope.box is None:
-        return InvariantBall(True, (0.0,) * n, math.inf, 0.0, math.inf, "the rate holds for all x")
+        return InvariantSet(True, (0.0,) * n, math.inf, 0.0, math.inf, "the rate holds for all x")
     B = np.array(scope.box, dtype=float)
     if not (lam > 0 and math.isfinite(lam)):
-        return InvariantBall(False, (), math.nan, math.nan, -math.inf, "no positive rate")
+        return InvariantSet(False, (), math.nan, math.nan, -math.inf, "no positive rate")
     if not scope.covers_time(horizon):
-        return InvariantBall(
+        return InvariantSet(
             False, (), math.nan, math.nan, -math.inf, f"the rate does not cover t in [0, {horizon}]"
         )
     x0 = _near_equilibrium(F_num, 0.5 * (support[:, 0] + support[:, 1]))
@@ -170,7 +172,7 @@ def invariant_ball(
                 mags.append(max(abs(lo), abs(hi)))
             eps2 = max(eps2, sum_sq_up(mags))
     except UnsupportedExpression as exc:
-        return InvariantBall(
+        return InvariantSet(
             False, tuple(map(float, x0)), math.nan, math.nan, -math.inf, f"no enclosure: {exc}"
         )
     eps = sqrt_up(eps2)
@@ -187,7 +189,7 @@ def invariant_ball(
     room = down(room - r)
     centre = tuple(float(v) for v in x0)
     if room > 0:
-        return InvariantBall(
+        return InvariantSet(
             True,
             centre,
             r,
@@ -197,7 +199,7 @@ def invariant_ball(
             f"{eps:.3g}, so r >= eps/lambda = {eps / lam:.3g}) contains the support and lies in "
             f"the box with room {room:.6g}: forward invariant (analysis/invariance.py)",
         )
-    return InvariantBall(
+    return InvariantSet(
         False,
         centre,
         r,
@@ -270,7 +272,7 @@ def best_invariant_set(
     horizon: float,
     F_num,
     enclose=None,
-) -> InvariantBall:
+) -> InvariantSet:
     """The proved invariant set with the largest room: the ball of :func:`invariant_ball`, or a
     box between the support and the region (:func:`invariant_box`)."""
     ball = invariant_ball(F, states, t, lam, scope, support, horizon, F_num, enclose)
@@ -283,13 +285,15 @@ def best_invariant_set(
         return best
     for frac in (0.5, 0.0):
         S = support + frac * (B - support)
-        room = min(min(down(S[i, 0] - B[i, 0]), down(B[i, 1] - S[i, 1])) for i in range(len(S)))
+        room = min(
+            min(_gap_down(S[i, 0], B[i, 0]), _gap_down(B[i, 1], S[i, 1])) for i in range(len(S))
+        )
         if (best.proved and room <= best.room) or not invariant_box(
             F, states, t, S, horizon, enclose
         ):
             continue
         sb = [[float(a), float(b)] for a, b in S]
-        best = InvariantBall(
+        best = InvariantSet(
             True,
             (),
             math.nan,
@@ -300,6 +304,11 @@ def best_invariant_set(
             f"room {room:.6g} (analysis/invariance.py)",
         )
     return best
+
+
+def _gap_down(a: float, b: float) -> float:
+    """Lower bound of ``a - b`` (exactly 0 when ``a == b``: that subtraction is exact)."""
+    return 0.0 if a == b else down(a - b)
 
 
 def _fmt(v) -> str:

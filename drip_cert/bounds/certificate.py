@@ -25,7 +25,7 @@ from drip_cert.analysis.constants import (
     uncertainty_constants,
 )
 from drip_cert.analysis.contraction import ContractionResult
-from drip_cert.analysis.invariance import InvariantBall, best_invariant_set
+from drip_cert.analysis.invariance import InvariantSet, best_invariant_set
 from drip_cert.errors import AssumptionViolation, DripCertError
 from drip_cert.provenance import Check, How, Quantity, Scope, Verdict, json_float, verdict_of
 from drip_cert.rounding import div_up, mul_up, up
@@ -133,7 +133,7 @@ class Certificate:
     tasil: Any | None = None  # drip_cert.bounds.tasil.TasilCertificate
     tasil_provenance: Mapping[str, Any] = field(default_factory=dict)
     notes: tuple[str, ...] = ()
-    invariance: InvariantBall | None = None
+    invariance: InvariantSet | None = None
     extra_quantities: tuple[Quantity, ...] = ()  #: other inputs of the checks (h0, h1, gamma0)
 
     @property
@@ -294,7 +294,7 @@ def _rate_check(cid: str, r: Any, what: str, source: str) -> Check:
     )
 
 
-def _invariance(s: System, r: Any, opts: ContractionSettings) -> InvariantBall | None:
+def _invariance(s: System, r: Any, opts: ContractionSettings) -> InvariantSet | None:
     """A forward-invariant ball inside the box where the expert's rate is proved (None when the
     rate is global or not positive)."""
     if r.scope.all_x or not r.holds or not r.how.proved:
@@ -564,7 +564,7 @@ def _time_ok(scope: Scope, horizon: float) -> tuple[bool, str]:
     return False, f"proved only for {scope.describe()}, not for t in [0, {horizon:g}]"
 
 
-def _expert_scope(r: Any, inv: InvariantBall | None, horizon: float) -> tuple[bool, str]:
+def _expert_scope(r: Any, inv: InvariantSet | None, horizon: float) -> tuple[bool, str]:
     """Is the expert's rate usable for the trajectories the certificate is about?"""
     ok, why = _time_ok(r.scope, horizon)
     if not ok:
@@ -579,7 +579,7 @@ def _expert_scope(r: Any, inv: InvariantBall | None, horizon: float) -> tuple[bo
     )
 
 
-def _tasil_scope(r: Any, inv: InvariantBall | None, tasil: Any, horizon: float) -> tuple[bool, str]:
+def _tasil_scope(r: Any, inv: InvariantSet | None, tasil: Any, horizon: float) -> tuple[bool, str]:
     """The TaSIL bound uses the rate along the learned trajectory: it must stay where the rate
     (and L_Delta) hold. With a proved invariant ball the lemma's tube condition (gap <= R, R
     below the ball's room) keeps it there."""
