@@ -22,6 +22,7 @@ MODULES = (
     "proofs_check.l1drac_maps",
     "proofs_check.paper_example",
     "proofs_check.paper_text",
+    "proofs_check.invariance",
     "proofs_check.implementation",
 )
 

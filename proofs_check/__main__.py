@@ -43,6 +43,7 @@ def main(argv: list[str] | None = None) -> int:
         print(
             f"{len(results)} checks: {counts[Verdict.PASS]} PASS, {counts[Verdict.ERRATUM]} "
             f"ERRATUM (see proofs_check/ERRATA.md), {counts[Verdict.FAIL]} FAIL"
+            + (f", {counts[Verdict.SKIP]} SKIP" if counts[Verdict.SKIP] else "")
         )
     return 1 if any(r.verdict is Verdict.FAIL for r in results) else 0
 

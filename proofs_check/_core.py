@@ -17,6 +17,9 @@ Verdicts
     A finding, not a failure: the exit status stays 0.
 ``FAIL``
     The (corrected) statement does not hold: a bug in drip-cert or in the mathematics.
+``SKIP``
+    The check could not run here (the paper's source text is not available); it says nothing
+    either way and does not change the exit status.
 
 ``residual`` is the largest violation found, signed so that a positive value is a violation
 (``max(lhs - rhs)`` over the instances tried, usually relative to the size of the sides) or,
@@ -41,6 +44,7 @@ class Verdict(StrEnum):
     PASS = "PASS"
     FAIL = "FAIL"
     ERRATUM = "ERRATUM"
+    SKIP = "SKIP"
 
 
 @dataclass(frozen=True)

@@ -4,8 +4,8 @@ These errata are about notation (a reference, an index, a symbol), so there is n
 compute: each check confirms that the source still says what ERRATA.md records (the check fails
 if the source no longer contains it, i.e. the record is stale). The source is looked up at
 ``$DRIP_PAPER_TEX``, else ``shared/papers/drip_paper.tex`` beside the repository (where the
-project keeps its shared folder); where it cannot be found the
-verdict stays ERRATUM and the detail says that it was not re-verified.
+project keeps its shared folder); where it cannot be found the verdict is SKIP (not
+re-verified, nothing claimed either way).
 """
 
 from __future__ import annotations
@@ -14,7 +14,7 @@ import os
 import re
 from pathlib import Path
 
-from proofs_check._core import CheckResult, Context, register, result
+from proofs_check._core import CheckResult, Context, Verdict, register, result
 
 _REPO = Path(__file__).resolve().parent.parent
 _CANDIDATES = (
@@ -36,13 +36,13 @@ def _source() -> str | None:
 def _textual(name: str, label: str, erratum: str, patterns: list[str], what: str) -> CheckResult:
     src = _source()
     if src is None:
-        return result(
-            name,
-            label,
-            holds=True,
+        return CheckResult(
+            name=name,
+            label=label,
+            verdict=Verdict.SKIP,
             residual=float("nan"),
             erratum=erratum,
-            detail=f"{what} (paper source not found: not re-verified)",
+            detail=f"{what} (paper source not found: not re-verified; set DRIP_PAPER_TEX)",
         )
     flat = re.sub(r"\s+", " ", src)
     missing = [p for p in patterns if re.search(p, flat) is None]

@@ -96,3 +96,21 @@ def test_same_seed_same_numbers():
     a = run_checks(quick=True, seed=3, only="decomposition")
     b = run_checks(quick=True, seed=3, only="decomposition")
     assert [r.residual for r in a] == [r.residual for r in b]
+
+
+def test_invariant_set_check_fails_on_a_too_small_set():
+    from proofs_check.invariance import check_invariant_sets
+
+    ctx = _ctx("invariance.sets_random_systems")
+    assert check_invariant_sets(ctx).verdict is Verdict.PASS
+    ctx = _ctx("invariance.sets_random_systems")
+    res = check_invariant_sets(ctx, radius_factor=0.5)
+    assert res.verdict is Verdict.FAIL and res.residual > 0
+
+
+def test_paper_text_checks_skip_without_the_source(monkeypatch):
+    """Without the paper's LaTeX source the textual errata are SKIP (not ERRATUM with NaN)."""
+    monkeypatch.setenv("DRIP_PAPER_TEX", "/nonexistent/drip_paper.tex")
+    res = run_checks(quick=True, seed=0, only="text.")
+    assert res and all(r.verdict is Verdict.SKIP for r in res)
+    assert main(["--quick", "--only", "text."]) == 0
