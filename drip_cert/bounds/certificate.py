@@ -294,7 +294,7 @@ def _rate_check(cid: str, r: Any, what: str, source: str) -> Check:
     )
 
 
-def _invariance(s: System, r: Any, opts: ContractionSettings) -> InvariantSet | None:
+def _invariance(s: System, r: Any) -> InvariantSet | None:
     """A forward-invariant ball inside the box where the expert's rate is proved (None when the
     rate is global or not positive)."""
     if r.scope.all_x or not r.holds or not r.how.proved:
@@ -367,7 +367,7 @@ def certify(spec: Spec, *, tasil: Any | None = None) -> Certificate:
 
     ce = analyse_contraction(s, "expert", opts)
     r = ce.euclidean
-    inv = _invariance(s, r, opts)
+    inv = _invariance(s, r)
     a2 = _rate_check("DRIP-A2", r, "expert closed loop", "DRIP Assumption 2")
     checks.append(a2.with_scope(*_expert_scope(r, inv, s.horizon)))
     lam_ex = r.to_quantity()
@@ -462,7 +462,6 @@ def certify(spec: Spec, *, tasil: Any | None = None) -> Certificate:
         extra_q.extend(q for q in tq if q.name != "gamma0")
     if tasil is not None:
         ok = tasil.rho is not None and math.isfinite(tasil.rho)
-        t_inputs = [q for q in extra_q] + [lam_ex]
         tcheck = Check.derive(
             "TaSIL",
             ok,
@@ -470,7 +469,7 @@ def certify(spec: Spec, *, tasil: Any | None = None) -> Certificate:
             + (f"{tasil.rho:.6g}" if ok else "inf")
             + f" ({tasil.rho_form}); deterministic gap bound over the given initial "
             f"states {tasil.gap_bound:.6g}" + ("" if ok else f"; {tasil.gap_reason}"),
-            inputs=t_inputs,
+            inputs=[*extra_q, lam_ex],
             method=How.SOUND,
             lhs=float(tasil.rho) if ok else math.inf,
             rhs=math.inf,
