@@ -25,9 +25,9 @@ import numpy as np
 
 from drip_cert._jax import jax, jnp
 from drip_cert.control.l1drac import L1Params
-from drip_cert.learn.mlp import MLP, init_mlp
+from drip_cert.model.mlp import MLP, init_mlp
+from drip_cert.model.numeric import SimModel, make_model
 from drip_cert.sim.engine import SCENARIOS, SimConfig, _default_workers, simulate
-from drip_cert.sim.model import SimModel, make_model
 from drip_cert.sim.noise import normals
 
 N = 4

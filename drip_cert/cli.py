@@ -18,14 +18,14 @@ from drip_cert.errors import AssumptionViolation, DripCertError, InfeasibleDesig
 
 
 def _print_json(obj: Any) -> None:
-    from drip_cert.report import jsonable
+    from drip_cert.numerics.atomic_io import jsonable
 
     sys.stdout.write(json.dumps(jsonable(obj), indent=2, allow_nan=False) + "\n")
 
 
 # ---------------------------------------------------------------------------- subcommands
 def cmd_check_spec(args: argparse.Namespace) -> int:
-    from drip_cert.system import load_spec
+    from drip_cert.spec import load_spec
 
     spec = load_spec(args.spec)
     s = spec.system
@@ -43,7 +43,7 @@ def cmd_check_spec(args: argparse.Namespace) -> int:
 def cmd_certify(args: argparse.Namespace) -> int:
     from drip_cert.bounds.certificate import certify
     from drip_cert.report import certificate_markdown
-    from drip_cert.system import load_spec
+    from drip_cert.spec import load_spec
 
     spec = load_spec(args.spec)
     cert = certify(spec)

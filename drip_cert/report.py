@@ -226,60 +226,6 @@ def validation_text(rep: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
-def jsonable(obj: Any) -> Any:
-    """Recursively convert to JSON-ready values: numpy scalars/arrays to Python, ``inf`` to the
-    strings ``"inf"``/``"-inf"``, NaN to ``None``."""
-    import numpy as np
-
-    if isinstance(obj, dict):
-        return {str(k): jsonable(v) for k, v in obj.items()}
-    if isinstance(obj, list | tuple):
-        return [jsonable(v) for v in obj]
-    if isinstance(obj, np.ndarray):
-        return jsonable(obj.tolist())
-    if isinstance(obj, bool | np.bool_):
-        return bool(obj)
-    if isinstance(obj, int | np.integer):
-        return int(obj)
-    if isinstance(obj, float | np.floating):
-        v = float(obj)
-        if math.isnan(v):
-            return None
-        if math.isinf(v):
-            return "inf" if v > 0 else "-inf"
-        return v
-    return obj
-
-
-def atomic_write_text(path: Any, text: str) -> None:
-    """Write ``text`` to ``path`` through a temporary file and a rename (no half-written file)."""
-    import os
-    import tempfile
-    from pathlib import Path
-
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.name + ".", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w") as fh:
-            fh.write(text)
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)  # mkstemp creates 0600; give the usual file mode
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
-
-
-def atomic_write_json(path: Any, obj: Any) -> None:
-    """Write ``obj`` as JSON (via :func:`jsonable`) atomically."""
-    import json
-
-    atomic_write_text(path, json.dumps(jsonable(obj), indent=2, allow_nan=False) + "\n")
-
-
 def reproduce_figure(
     res: Any, res_paper: Any, cert: Any, out: Any, at_certified: bool, name: str | None = None
 ) -> list[Any]:

@@ -46,9 +46,9 @@ from typing import Any
 import numpy as np
 
 from drip_cert.errors import SpecError
-from drip_cert.sim import stats as _stats
-from drip_cert.system.settings import SimSettings
-from drip_cert.system.system import System
+from drip_cert.model.system import System
+from drip_cert.numerics import stats as _stats
+from drip_cert.spec.settings import SimSettings
 
 MAX_STEPS = 200_000  #: largest number of Euler steps per path accepted for a certified-T_s run
 SHORT_STEPS = 2_000  #: steps of the short-horizon run at the certified T_s (dt = T_s)
@@ -229,7 +229,7 @@ def check_radius(
     dict
         ``bound = rho``; ``empirical``: the empirical ``(1 - delta)``-quantile of the per-path
         maxima; ``confidence_low``/``confidence_high``: distribution-free one-sided bounds on
-        that quantile (:func:`~drip_cert.sim.stats.upper_quantile_bounds`). ``violated`` when
+        that quantile (:func:`~drip_cert.numerics.stats.upper_quantile_bounds`). ``violated`` when
         ``confidence_low > rho``, which is the same event as the Clopper-Pearson lower bound of
         the exceedance frequency ``#{max_t r_t > rho} / n`` being ``> delta`` (reported as
         ``exceed_*``). Unknown paths count as within the radius for ``violated`` and as outside
@@ -343,7 +343,7 @@ def check_tail(
         The claim.
     level
         Familywise confidence level; each time is tested at
-        :func:`~drip_cert.sim.stats.bonferroni_level` ``(level, n_times)``.
+        :func:`~drip_cert.numerics.stats.bonferroni_level` ``(level, n_times)``.
 
     Returns
     -------
@@ -1019,8 +1019,8 @@ def validate_spec(
     A spec without a learned policy gets one trained by TaSIL with its ``[tasil]`` settings.
     """
     from drip_cert.bounds.certificate import certify
-    from drip_cert.learn.workflow import train_on_system
-    from drip_cert.system import load_spec
+    from drip_cert.learn.imitation import train_on_system
+    from drip_cert.spec import load_spec
 
     spec = load_spec(spec_path)
     s = spec.system
@@ -1055,7 +1055,7 @@ def validate_spec(
     if out is not None:
         out = Path(out)
         res.save(out / "simulation")
-        from drip_cert.report import atomic_write_json
+        from drip_cert.numerics.atomic_io import atomic_write_json
 
         atomic_write_json(out / "validation.json", rep)
     return rep

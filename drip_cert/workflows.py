@@ -54,10 +54,10 @@ def train_from_spec(
     ``train.json`` (settings, losses, timings, held-out gaps). Every file is written atomically.
     """
     from drip_cert.learn.data import save_demonstrations
+    from drip_cert.learn.imitation import nominal_field, train_on_system
     from drip_cert.learn.tasil import evaluate_gap
-    from drip_cert.learn.workflow import nominal_field, train_on_system
-    from drip_cert.report import atomic_write_json
-    from drip_cert.system import load_spec
+    from drip_cert.numerics.atomic_io import atomic_write_json
+    from drip_cert.spec import load_spec
 
     spec = load_spec(spec_path)
     st = spec.settings.tasil
@@ -132,16 +132,15 @@ def reproduce(
 ) -> dict[str, Any]:
     """``drip-cert reproduce paper-4d``; see the module docstring."""
     from drip_cert.bounds.certificate import certify
+    from drip_cert.learn.imitation import nominal_field, train_on_system
     from drip_cert.learn.tasil import evaluate_gap
-    from drip_cert.learn.workflow import nominal_field, train_on_system
+    from drip_cert.numerics.atomic_io import atomic_write_json, atomic_write_text
     from drip_cert.report import (
-        atomic_write_json,
-        atomic_write_text,
         certificate_markdown,
         reproduce_figure,
         reproduce_markdown,
     )
-    from drip_cert.system import load_spec
+    from drip_cert.spec import load_spec
     from drip_cert.validate import validate
 
     t_start = time.perf_counter()
@@ -240,7 +239,7 @@ def reproduce(
 
 
 def _strip(obj: Any) -> Any:
-    from drip_cert.report import jsonable
+    from drip_cert.numerics.atomic_io import jsonable
 
     return jsonable(obj)
 

@@ -24,10 +24,11 @@ EXAMPLES = ("unmatched_2d", "nonlinear_2d", "infeasible_2d")
 def run_one(name: str, out: Path, quick: bool = False, seed: int = 0) -> dict:
     """Certify, train, simulate and draw one example; returns a small summary."""
     from drip_cert.bounds.certificate import certify
-    from drip_cert.learn.workflow import tasil_settings, train_on_system
-    from drip_cert.report import atomic_write_text, certificate_markdown, reproduce_figure
-    from drip_cert.system import load_spec
-    from drip_cert.system.spec import Spec
+    from drip_cert.learn.imitation import tasil_settings, train_on_system
+    from drip_cert.numerics.atomic_io import atomic_write_text
+    from drip_cert.report import certificate_markdown, reproduce_figure
+    from drip_cert.spec import load_spec
+    from drip_cert.spec.load import Spec
     from drip_cert.validate import SimSettings, validate
 
     spec = load_spec(ROOT / "examples" / name / f"{name}.toml")

@@ -14,7 +14,6 @@ from drip_cert.analysis.contraction import (
     contraction_rate,
     jacobian_function,
 )
-from drip_cert.analysis.interval import UnsupportedExpression
 from drip_cert.analysis.lmi import (
     DEFAULT_BISECTION_TOL,
     contraction_metric,
@@ -24,6 +23,7 @@ from drip_cert.analysis.lmi import (
 )
 from drip_cert.analysis.lognorm import mu_2, mu_2_weighted, spectral_abscissa
 from drip_cert.errors import SpecError
+from drip_cert.numerics.interval import UnsupportedExpression
 from drip_cert.provenance import How
 
 #: closed-form log norms of O(1) matrices vs LAPACK

@@ -13,7 +13,8 @@ import scipy.stats
 from drip_cert._jax import jax, jnp
 from drip_cert.control.l1drac import L1Params
 from drip_cert.errors import SpecError
-from drip_cert.learn.mlp import init_mlp
+from drip_cert.model.mlp import init_mlp
+from drip_cert.model.numeric import make_model
 from drip_cert.sim.engine import (
     STATUS_CAP,
     STATUS_NONFINITE,
@@ -21,7 +22,6 @@ from drip_cert.sim.engine import (
     build_chunk_fn,
     simulate,
 )
-from drip_cert.sim.model import make_model
 
 Z_CLT = 4.5
 """CLT tolerance in standard errors: a correct sampler fails a check with probability ~7e-6
@@ -404,7 +404,7 @@ def test_config_errors_name_the_field():
 
 def test_theta_ad_default_equals_first_rows_of_gbar_inverse():
     # Theta_ad = [I_m 0] [g g_perp]^{-1} (L1-DRAC Assumption 1), g_perp from the SVD of g
-    from drip_cert.sim.model import theta_ad_from_g
+    from drip_cert.model.numeric import theta_ad_from_g
 
     g = np.array([[1.0, 0.2], [0.0, 1.0], [0.5, -0.3], [0.1, 0.0]])
     g_perp = np.linalg.svd(g)[0][:, 2:]

@@ -10,9 +10,9 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from drip_cert.errors import SpecError
-from drip_cert.learn.mlp import init_mlp
-from drip_cert.system.blocks import mlp_block
-from drip_cert.system.expr import parse_expression
+from drip_cert.model.blocks import mlp_block
+from drip_cert.model.expr import parse_expression
+from drip_cert.model.mlp import init_mlp
 
 X1, X2 = sp.symbols("x1 x2", real=True)
 T = sp.Symbol("t", real=True)

@@ -23,8 +23,8 @@ from drip_cert.analysis.growth import (
     holder_half_bound,
     lipschitz_bound,
 )
+from drip_cert.model.expr import parse_expression
 from drip_cert.provenance import How
-from drip_cert.system.expr import parse_expression
 
 #: a sound bound may exceed the supremum by the branch-and-bound stopping rule (relative
 #: BNB_RTOL) plus outward rounding; 10x that is still far below any modelling error

@@ -11,7 +11,7 @@ import sympy as sp
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from drip_cert.analysis.interval import (
+from drip_cert.numerics.interval import (
     MatrixEnclosure,
     UnsupportedExpression,
     cancellation_free,
@@ -243,7 +243,7 @@ def test_enclosure_of_a_cancelling_form_is_tight(expr, z):
     assert hi - lo <= REWRITE_REL_WIDTH * abs(float(exact))
     # contrast: the literal form (no rewrite) is rigorous too, but keeps no correct digit: its
     # width, that of the rounding of the terms that cancel (~1e-16 absolute), exceeds the value
-    from drip_cert.analysis.interval import _compile
+    from drip_cert.numerics.interval import _compile
 
     llo, lhi = _compile(sp.sympify(expr), {x: 0}, None)([(z, z)])
     assert llo <= exact <= lhi and lhi - llo > abs(float(exact))

@@ -20,7 +20,7 @@ from drip_cert.learn.data import (
     save_demonstrations,
     simulate_closed_loop,
 )
-from drip_cert.learn.mlp import init_mlp
+from drip_cert.model.mlp import init_mlp
 
 IVP_TOL = 1e-12  # rtol = atol of the DOP853 reference solution (near double precision)
 RK4_VS_IVP_ATOL = 1e-10  # h = 0.0125 RK4 on rates <= ~1: error ~ h^4 / 100 ~ 1e-10 at most

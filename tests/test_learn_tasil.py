@@ -21,8 +21,8 @@ from drip_cert.learn.losses import (
     imitation_loss,
     safe_norm,
 )
-from drip_cert.learn.mlp import apply_params, init_mlp, jax_params, load_mlp, mlp_from_params
 from drip_cert.learn.tasil import evaluate_gap, train_policy
+from drip_cert.model.mlp import apply_params, init_mlp, jax_params, load_mlp, mlp_from_params
 
 FD_STEP = 1e-5  # central differences: truncation ~ h^2 |f'''| ~ 1e-10, rounding ~ eps/h ~ 1e-11
 FD_ATOL = 1e-8  # both error sources above, with two orders of margin

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from drip_cert._jax import jax, jnp
-from drip_cert.learn.mlp import apply_params, init_mlp
+from drip_cert.model.mlp import apply_params, init_mlp
 
 # float64 evaluation of the same sums in another order: a few ulps of the O(1) outputs
 SUM_ORDER_TOL = 1e-13

@@ -1,4 +1,4 @@
-"""Tests of drip_cert.learn.mlp_bounds: activation constants, Lipschitz and Jacobian-Lipschitz
+"""Tests of drip_cert.analysis.mlp_bounds: activation constants, Lipschitz and Jacobian-Lipschitz
 bounds of MLPs (DRIP Assumption PolicyRegularity), LipSDP, interval enclosures."""
 
 from __future__ import annotations
@@ -12,9 +12,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from drip_cert._jax import jax, jnp
-from drip_cert.errors import SpecError
-from drip_cert.learn.mlp import MLP, activation_fn, init_mlp
-from drip_cert.learn.mlp_bounds import (
+from drip_cert.analysis.mlp_bounds import (
     activation_bounds,
     enclose_activation,
     enclose_activation_prime,
@@ -26,8 +24,10 @@ from drip_cert.learn.mlp_bounds import (
     lipschitz_lipsdp,
     lipschitz_product,
 )
+from drip_cert.errors import SpecError
+from drip_cert.model.mlp import MLP, activation_fn, init_mlp
+from drip_cert.numerics.rounding import LIBM_REL, ndtr_rel_budget
 from drip_cert.provenance import How
-from drip_cert.rounding import LIBM_REL, ndtr_rel_budget
 
 # a sup over a grid of spacing 1e-4 misses the true sup of a smooth function by O(h^2) ~ 1e-8
 GRID_SUP_TOL = 1e-7

@@ -7,11 +7,11 @@ import math
 import numpy as np
 import pytest
 
+from drip_cert.analysis.policy_regularity import jacobian_lipschitz
 from drip_cert.cli import main
-from drip_cert.learn.mlp import init_mlp
-from drip_cert.learn.workflow import jacobian_lipschitz
+from drip_cert.model.mlp import init_mlp
 from drip_cert.provenance import How
-from drip_cert.system.spec import load_spec
+from drip_cert.spec.load import load_spec
 
 BOX = np.array([[-1.0, 1.0], [-1.0, 1.0]])
 

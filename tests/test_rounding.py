@@ -1,4 +1,4 @@
-"""drip_cert.rounding: every outward-rounded result encloses the exact one.
+"""drip_cert.numerics.rounding: every outward-rounded result encloses the exact one.
 
 References are exact (``fractions.Fraction`` for the correctly rounded operations: every float is a
 rational) or mpmath at 50 digits (library functions, eigenvalues, singular values). The library
@@ -19,7 +19,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.special import ndtr
 
-from drip_cert.rounding import (
+from drip_cert.numerics.rounding import (
     LIBM_REL,
     add_down,
     add_up,

@@ -13,8 +13,8 @@ import pytest
 
 from drip_cert.cli import main
 from drip_cert.errors import SpecError
-from drip_cert.system import load_spec
-from drip_cert.system.settings import (
+from drip_cert.spec import load_spec
+from drip_cert.spec.settings import (
     CONSTANT_NAMES,
     ConstantsTable,
     ContractionSettings,
@@ -257,7 +257,7 @@ def test_written_values_are_typed(tmp_path):
 
 
 def test_spec_rebuilt_from_tables_and_with_system(tmp_path):
-    from drip_cert.system.spec import Spec
+    from drip_cert.spec.load import Spec
 
     spec = load_spec(write(tmp_path, "[simulation]\npaths = 7"))
     again = Spec(spec.path, spec.system, spec.tables)
@@ -308,8 +308,8 @@ def test_uncertainty_constants_validates_a_plain_mapping(tmp_path):
 
 
 def test_settings_module_is_in_the_spec_layer():
-    """drip_cert.system.settings imports only errors, provenance and numerics."""
-    tree = ast.parse(Path("drip_cert/system/settings.py").read_text())
+    """drip_cert.spec.settings imports only errors, provenance and numerics."""
+    tree = ast.parse(Path("drip_cert/spec/settings.py").read_text())
     mods = set()
     for node in ast.walk(tree):
         if isinstance(node, ast.ImportFrom) and node.module:
@@ -317,4 +317,4 @@ def test_settings_module_is_in_the_spec_layer():
         elif isinstance(node, ast.Import):
             mods.update(a.name for a in node.names)
     ours = {m for m in mods if m.startswith("drip_cert")}
-    assert ours <= {"drip_cert.errors", "drip_cert.provenance", "drip_cert.rounding"}, ours
+    assert ours <= {"drip_cert.errors", "drip_cert.provenance", "drip_cert.numerics.rounding"}, ours

@@ -8,8 +8,8 @@ import pytest
 import sympy as sp
 
 from drip_cert.errors import SpecError
-from drip_cert.learn.mlp import init_mlp
-from drip_cert.system import load_spec
+from drip_cert.model.mlp import init_mlp
+from drip_cert.spec import load_spec
 
 MINIMAL = """
 [system]

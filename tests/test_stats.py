@@ -1,4 +1,4 @@
-"""Tests of the chunked gap statistics (drip_cert.sim.stats)."""
+"""Tests of the chunked gap statistics (drip_cert.numerics.stats)."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import pytest
 import scipy.stats
 
 from drip_cert.errors import SpecError
-from drip_cert.sim.stats import (
+from drip_cert.numerics.stats import (
     accumulate,
     bonferroni_level,
     clopper_pearson_lower,

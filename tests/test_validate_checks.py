@@ -1,7 +1,8 @@
 """The validation checks (drip_cert.validate) on synthetic gap samples, and one CLI run.
 
 Each test builds per-path gap norms ``r`` (paths x recorded times) with a seeded generator, turns
-them into the engine's statistics with :mod:`drip_cert.sim.stats`, and calls the check functions
+them into the engine's statistics with :mod:`drip_cert.numerics.stats`, and calls the check
+functions
 directly: no simulation, except the last test, which runs ``drip-cert validate --quick``.
 """
 
@@ -15,7 +16,13 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from drip_cert.sim.stats import accumulate, clopper_pearson_lower, finalize, new_sums, t_one_sided
+from drip_cert.numerics.stats import (
+    accumulate,
+    clopper_pearson_lower,
+    finalize,
+    new_sums,
+    t_one_sided,
+)
 from drip_cert.validate import (
     HOLDS,
     NOT_CHECKED,

@@ -1,10 +1,10 @@
 """Sound interval enclosures of block values and Jacobian entries, for the interval analyses.
 
 :func:`block_enclose_callback` returns the ``enclose`` callback that
-:mod:`drip_cert.analysis.interval` calls for every block application: for an MLP block it
+:mod:`drip_cert.numerics.interval` calls for every block application: for an MLP block it
 encloses the output (or a Jacobian entry) over the box of the arguments' enclosures by interval
-bound propagation (:func:`drip_cert.learn.mlp_bounds.enclose_output`,
-:func:`~drip_cert.learn.mlp_bounds.enclose_jacobian`, outward rounded). Blocks that are not MLPs
+bound propagation (:func:`drip_cert.analysis.mlp_bounds.enclose_output`,
+:func:`~drip_cert.analysis.mlp_bounds.enclose_jacobian`, outward rounded). Blocks that are not MLPs
 and Hessian entries have no enclosure here: the callback returns ``None`` and the analysis falls
 back to its sampled estimate, labelled as such.
 """
@@ -15,8 +15,8 @@ from collections.abc import Callable, Mapping
 
 import numpy as np
 
-from drip_cert.learn.mlp_bounds import enclose_jacobian, enclose_output
-from drip_cert.system.blocks import Block, BlockFunction
+from drip_cert.analysis.mlp_bounds import enclose_jacobian, enclose_output
+from drip_cert.model.blocks import Block, BlockFunction
 
 
 def block_enclose_callback(blocks: Mapping[str, Block]) -> Callable:

@@ -27,10 +27,11 @@ from dataclasses import dataclass
 import numpy as np
 import sympy as sp
 
-from drip_cert.analysis.constants import batch_fn, growth_ratio_estimate, holder_estimate
-from drip_cert.learn.mlp import MLP
-from drip_cert.provenance import How, Quantity
-from drip_cert.rounding import (
+from drip_cert.analysis.constants import batch_fn
+from drip_cert.model.blocks import block_applications
+from drip_cert.model.mlp import MLP
+from drip_cert.model.system import System
+from drip_cert.numerics.rounding import (
     add_down_np,
     add_up,
     add_up_np,
@@ -45,8 +46,8 @@ from drip_cert.rounding import (
     sum_up_np,
     up_np,
 )
-from drip_cert.system.blocks import block_applications
-from drip_cert.system.system import System
+from drip_cert.numerics.sampling import growth_ratio_estimate, holder_estimate
+from drip_cert.provenance import How, Quantity
 
 SUPERLINEAR_RADIUS = 1e5
 #: a sampled growth ratio that peaks at radius >= this (the sampler goes to 1e6) is taken to grow
@@ -141,7 +142,7 @@ def _box_radius_up(box: np.ndarray) -> float:
 def _f_at_zero_up(dec: AffineBlocks, s: System) -> float:
     """Upper bound of ``||F(0)|| = ||c + sum_k C_k h_k(0)||``: each ``h_k(0)`` enclosed by
     interval bound propagation, the affine combination in interval arithmetic."""
-    from drip_cert.learn.mlp_bounds import enclose_output
+    from drip_cert.analysis.mlp_bounds import enclose_output
 
     c = np.asarray(dec.c, dtype=float)
     rad_c = CONVERSION_ULPS * np.spacing(np.abs(c))  # the conversion of the true c to floats
@@ -193,7 +194,7 @@ def closed_loop_constants(
     global_rate
         Whether ``lam`` holds on all of ``R^n`` (needed for a sound ``Delta_star``).
     """
-    from drip_cert.learn.mlp_bounds import lipschitz_bound
+    from drip_cert.analysis.mlp_bounds import lipschitz_bound
 
     F = s.closed_loop(which)
     box = np.array(s.support, dtype=float)

@@ -30,27 +30,9 @@ from typing import Any
 import numpy as np
 import sympy as sp
 
+from drip_cert.model.system import System
 from drip_cert.provenance import How, Quantity
-from drip_cert.system.settings import ConstantsTable
-from drip_cert.system.system import System
-
-SAMPLE_RADII = (0.0, 0.1, 0.3, 1.0, 3.0, 10.0, 30.0, 100.0, 1e3, 1e4, 1e6)
-#: radii at which growth ratios are sampled; 1e6 stands in for the limit r -> infinity
-SAMPLES_PER_RADIUS = 256  #: random directions per radius for sampled estimates
-SAMPLE_SEED = 20260101  #: fixed seed of the sampled estimates (reproducible reports)
-
-
-def theta_ad_symbolic(s: System) -> sp.ImmutableMatrix:
-    """``Theta_ad(t) = [I_m 0] gbar(t)^{-1} = (g^T g)^{-1} g^T`` (L1-DRAC Assumption 1).
-
-    With ``gbar = [g, g_perp]`` and ``Im g_perp = ker g^T``, any ``v = g a + g_perp b`` has
-    ``g^T v = g^T g a``, so the first m rows of ``gbar^{-1}`` are the pseudo-inverse of ``g``
-    whatever basis ``g_perp`` is chosen.
-    """
-    g = sp.Matrix(s.g)
-    gtg = g.T * g
-    inv = gtg.inv() if s.g_is_constant else sp.simplify(gtg.inv())
-    return sp.ImmutableMatrix(sp.simplify(inv * g.T))
+from drip_cert.spec.settings import ConstantsTable
 
 
 def g_perp_at(s: System, t: float = 0.0) -> np.ndarray:
@@ -58,20 +40,6 @@ def g_perp_at(s: System, t: float = 0.0) -> np.ndarray:
     G = s.g_at(t)
     u, _, _ = np.linalg.svd(G, full_matrices=True)
     return u[:, s.m :]
-
-
-def perp_projector_symbolic(s: System) -> sp.ImmutableMatrix:
-    """``P_perp(t) = I - g(t) Theta_ad(t) = g_perp(t) g_perp(t)^T``, the orthogonal projector
-    onto ``ker g(t)^T``.
-
-    For orthonormal ``g_perp``, ``||g_perp^T v|| = ||P_perp v||`` and
-    ``||g_perp^T M||_F = ||P_perp M||_F`` (``P_perp^T P_perp = P_perp``), so every growth and
-    regularity constant of the unmatched part ``g_perp^T Lambda`` (L1-DRAC (7)) equals that of
-    ``P_perp Lambda``, which is a closed form in ``t`` even when ``g`` varies with time (no basis
-    has to be chosen at each ``t``).
-    """
-    g = sp.Matrix(s.g)
-    return sp.ImmutableMatrix(sp.eye(s.n) - g * sp.Matrix(theta_ad_symbolic(s)))
 
 
 #: pieces of [0, T] over which a time-varying g is enclosed (interval bounds of sup over t)
@@ -127,7 +95,7 @@ def _time_pieces(s: System, mats) -> list[tuple[float, float]]:
 
 def _enclose_t(M: sp.MatrixBase, t: sp.Symbol, piece: tuple[float, float]):
     """Entry-wise rigorous enclosure ``(lo, hi)`` of a matrix of ``t`` over ``piece``."""
-    from drip_cert.analysis.interval import enclose_expr
+    from drip_cert.numerics.interval import enclose_expr
 
     lo = np.empty(M.shape)
     hi = np.empty(M.shape)
@@ -139,7 +107,7 @@ def _enclose_t(M: sp.MatrixBase, t: sp.Symbol, piece: tuple[float, float]):
 
 def _fro_up(lo: np.ndarray, hi: np.ndarray) -> float:
     """Upper bound of ``||M||_F`` over the interval matrix (outward rounded)."""
-    from drip_cert.rounding import sqrt_up, sum_sq_up
+    from drip_cert.numerics.rounding import sqrt_up, sum_sq_up
 
     return sqrt_up(sum_sq_up(np.maximum(np.abs(lo), np.abs(hi)).ravel()))
 
@@ -161,9 +129,9 @@ def _sigma_min_down(lo: np.ndarray, hi: np.ndarray) -> float:
     """Lower bound of ``sigma_min(M)`` (M tall, n x m) over the interval matrix:
     ``sqrt(lambda_min(M^T M))``, ``M^T M`` enclosed by interval products and
     ``lambda_min(S) = -lambda_max(-S) >= -mu2_upper(-S)``."""
-    from drip_cert.analysis.interval import _add, _mul
     from drip_cert.analysis.lognorm import mu2_interval_upper
-    from drip_cert.rounding import sqrt_down
+    from drip_cert.numerics.interval import _add, _mul
+    from drip_cert.numerics.rounding import sqrt_down
 
     n, m = lo.shape
     Glo = np.empty((m, m))
@@ -185,11 +153,11 @@ def input_constants(s: System) -> InputConstants:
     ``how = exact``); for a time-varying ``g`` the suprema over ``[0, T]`` are interval bounds over
     :data:`TIME_PIECES` pieces (``how = sound``, scope ``t in [0, T]``).
     """
+    from drip_cert.numerics.rounding import sqrt_up
     from drip_cert.provenance import Scope
-    from drip_cert.rounding import sqrt_up
 
     g = sp.Matrix(s.g)
-    th = sp.Matrix(theta_ad_symbolic(s))
+    th = sp.Matrix(s.theta_ad)
     gdot = g.diff(s.t)
     pieces = _time_pieces(s, [g])
     const = s.g_is_constant
@@ -246,74 +214,6 @@ def input_constants(s: System) -> InputConstants:
 
 
 # ---------------------------------------------------------------------- sampled sup estimates
-def _directions(n: int, k: int, rng: np.random.Generator) -> np.ndarray:
-    v = rng.normal(size=(k, n))
-    v /= np.linalg.norm(v, axis=1, keepdims=True)
-    return v
-
-
-def sample_points(n: int, center: np.ndarray | None = None, seed: int = SAMPLE_SEED) -> np.ndarray:
-    """Points on spheres of radii :data:`SAMPLE_RADII` (plus the origin and the center)."""
-    rng = np.random.default_rng(seed)
-    pts = [np.zeros((1, n))]
-    for r in SAMPLE_RADII[1:]:
-        pts.append(r * _directions(n, SAMPLES_PER_RADIUS, rng))
-    if center is not None:
-        pts.append(center[None, :])
-    return np.concatenate(pts)
-
-
-def growth_ratio_estimate(
-    fn: Callable[[np.ndarray], np.ndarray],
-    n: int,
-    power: float,
-    times: np.ndarray,
-    seed: int = SAMPLE_SEED,
-) -> tuple[float, np.ndarray]:
-    """Sampled ``sup ||fn(t, a)|| / (1 + ||a||^2)^{power/2}`` and the maximiser.
-
-    ``power = 1`` is the drift form ``||F||^2 <= D^2 (1 + ||a||^2)``; ``power = 1/2`` is the
-    diffusion form ``||F||_F^2 <= D^2 (1 + ||a||^2)^{1/2}`` of L1-DRAC Assumption 4.
-    """
-    X = sample_points(n, seed=seed)
-    best, arg = 0.0, X[0]
-    for tt in times:
-        vals = fn(float(tt), X)
-        norms = np.linalg.norm(vals.reshape(len(X), -1), axis=1)
-        ratio = norms / (1.0 + np.sum(X**2, axis=1)) ** (power / 2.0)
-        i = int(np.nanargmax(ratio))
-        if ratio[i] > best:
-            best, arg = float(ratio[i]), X[i]
-    return best, arg
-
-
-def holder_estimate(
-    fn: Callable[[np.ndarray], np.ndarray],
-    n: int,
-    exponent: float,
-    times: np.ndarray,
-    seed: int = SAMPLE_SEED,
-) -> float:
-    """Sampled ``sup ||fn(t,a) - fn(t,b)|| / ||a - b||^exponent`` over pairs at many scales."""
-    rng = np.random.default_rng(seed + 1)
-    A = sample_points(n, seed=seed)
-    best = 0.0
-    for scale in (1e-4, 1e-2, 1e-1, 1.0, 10.0, 100.0):
-        B = A + scale * _directions(n, len(A), rng)
-        # pairs through the origin: the 1/2-Hoelder ratio of sqrt-type terms peaks there
-        B0 = np.zeros_like(A)
-        for P, Q in ((A, B), (B0, B)):
-            dist = np.linalg.norm(P - Q, axis=1)
-            ok = dist > 0
-            for tt in times:
-                diff = fn(float(tt), P) - fn(float(tt), Q)
-                num = np.linalg.norm(diff.reshape(len(P), -1), axis=1)
-                r = num[ok] / dist[ok] ** exponent
-                if r.size:
-                    best = max(best, float(np.nanmax(r)))
-    return best
-
-
 def batch_fn(s: System, exprs: sp.MatrixBase) -> Callable[[float, np.ndarray], np.ndarray]:
     """numpy-facing batched evaluation ``(t, X (N, n)) -> (N, ...)`` of system expressions."""
     from drip_cert._jax import jax, jnp
@@ -359,8 +259,8 @@ def uncertainty_constants(
     given = dict(given.values)
     n, m = s.n, s.m
     times = np.array([0.0]) if not _depends_on_t(s) else np.array([0.0, float(s.horizon)])
-    th = theta_ad_symbolic(s)
-    pperp = perp_projector_symbolic(s)
+    th = s.theta_ad
+    pperp = s.perp_projector
     ic = input_constants(s)
     out: dict[str, Quantity] = {}
 
@@ -395,7 +295,7 @@ def uncertainty_constants(
             if given_bound is not None and key != "p":
                 # only the bound is known: matched/unmatched parts bounded through the norms of
                 # Theta_ad and g_perp^T (||Theta Lambda|| <= sup_t ||Theta(t)||_2 ||Lambda||)
-                from drip_cert.rounding import mul_up
+                from drip_cert.numerics.rounding import mul_up
 
                 gb = Quantity(
                     f"Delta_{key}", given_bound, How.GIVEN, growth_src, "given in [uncertainty]"
@@ -436,7 +336,7 @@ def uncertainty_constants(
         full = sp.Matrix(mat)
         par = sp.Matrix(th) * full
         # the unmatched part g_perp^T Lambda has the norms of P_perp Lambda (see
-        # perp_projector_symbolic): a closed form in t also for a time-varying g
+        # System.perp_projector): a closed form in t also for a time-varying g
         perp = sp.Matrix(pperp) * full if n > m else None
         from drip_cert.analysis.growth import (
             growth_bound,

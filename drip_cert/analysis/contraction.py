@@ -8,7 +8,7 @@ by the Euclidean norm. :func:`contraction_rate` returns the largest ``lambda`` i
   ``lambda = -mu_2(J)`` exactly, for all ``x`` and ``t``.
 * ``'interval-bnb'``: a *sound* lower bound on the rate over a box of states (and a time range):
   rigorous interval enclosures of the Jacobian entries on sub-boxes
-  (:class:`~drip_cert.analysis.interval.MatrixEnclosure`), a rigorous Rohn-type bound of ``mu_2`` of
+  (:class:`~drip_cert.numerics.interval.MatrixEnclosure`), a rigorous Rohn-type bound of ``mu_2`` of
   the interval matrix (:func:`~drip_cert.analysis.lognorm.mu2_interval_upper`), and branch and bound
   that splits the worst sub-box along its widest (relative) side until the global upper bound is
   within ``tol`` of the best sampled value or the box budget is spent. A Jacobian that depends on
@@ -34,14 +34,14 @@ import numpy as np
 import sympy as sp
 from scipy.optimize import minimize
 
-from drip_cert.analysis.interval import (
+from drip_cert.analysis.lognorm import mu2_constant_bounds, mu2_interval_upper, mu_2
+from drip_cert.errors import SolverError, SpecError
+from drip_cert.numerics.interval import (
     EncloseCallback,
     MatrixEnclosure,
     UnsupportedExpression,
     opaque_functions,
 )
-from drip_cert.analysis.lognorm import mu2_constant_bounds, mu2_interval_upper, mu_2
-from drip_cert.errors import SolverError, SpecError
 from drip_cert.provenance import GLOBAL, How, Quantity, Scope, json_float
 
 __all__ = [
@@ -420,7 +420,7 @@ def contraction_rate(
         Optional vectorised numeric Jacobian ``J_num(t, X) -> (N, n, n)`` for sampling; built by
         :func:`jacobian_function` when absent.
     enclose
-        Interval callback for undefined functions (see :mod:`drip_cert.analysis.interval`).
+        Interval callback for undefined functions (see :mod:`drip_cert.numerics.interval`).
     method
         ``'auto'`` (exact if ``J`` is constant, else interval branch and bound, falling back to
         sampling when an expression has no sound enclosure), ``'exact-linear'``,

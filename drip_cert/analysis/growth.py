@@ -17,7 +17,7 @@ norm of ``F`` is the Euclidean norm of ``vec F``, so one code path serves both.
 Routes, each giving a sound upper bound where it applies (the smallest one is returned):
 
 (a) *bounded*: every entry (and, for the Lipschitz constant, every entry of the Jacobian) has a
-    finite rigorous interval enclosure over the whole space (:mod:`drip_cert.analysis.interval`
+    finite rigorous interval enclosure over the whole space (:mod:`drip_cert.numerics.interval`
     on the box ``(-inf, inf)^n``; ``exp`` and ``atan`` are given exact enclosures on infinite
     arguments here). Growth: the denominator is ``>= 1``, so ``||F||^2 <= sum max(lo^2, hi^2)``.
     Lipschitz: ``||J||_2 <= || |J| ||_2 <= ||M||_2`` for ``M_ij >= sup |J_ij|``, and ``||M||_2`` is
@@ -66,16 +66,16 @@ import numpy as np
 import sympy as sp
 from flint import arb
 
-from drip_cert.analysis.constants import (
+from drip_cert.numerics.interval import MatrixEnclosure, UnsupportedExpression, compile_enclosure
+from drip_cert.numerics.rounding import arb_hi as _arb_hi
+from drip_cert.numerics.rounding import arb_lo as _arb_lo
+from drip_cert.numerics.sampling import (
     SAMPLE_RADII,
     SAMPLE_SEED,
     SAMPLES_PER_RADIUS,
     sample_points,
 )
-from drip_cert.analysis.interval import MatrixEnclosure, UnsupportedExpression, compile_enclosure
 from drip_cert.provenance import How, Quantity
-from drip_cert.rounding import arb_hi as _arb_hi
-from drip_cert.rounding import arb_lo as _arb_lo
 
 __all__ = [
     "growth_bound",
@@ -712,7 +712,7 @@ def _wrapped_enclose(node: sp.Expr, args: list[Interval]) -> Interval | None:
 
 
 # ----------------------------------------------------------------------- rigorous scalars
-# _arb_lo / _arb_hi: float ends of an Arb ball moved one ulp outward (drip_cert.rounding)
+# _arb_lo / _arb_hi: float ends of an Arb ball moved one ulp outward (drip_cert.numerics.rounding)
 
 
 def _sub_up(hi: float, lo: float) -> float:

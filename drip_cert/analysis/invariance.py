@@ -45,9 +45,9 @@ from typing import Any
 import numpy as np
 import sympy as sp
 
-from drip_cert.analysis.interval import UnsupportedExpression, enclose_expr
+from drip_cert.numerics.interval import UnsupportedExpression, enclose_expr
+from drip_cert.numerics.rounding import add_up, div_up, down, sq_up, sqrt_up, sum_sq_up, up
 from drip_cert.provenance import Scope
-from drip_cert.rounding import add_up, div_up, down, sq_up, sqrt_up, sum_sq_up, up
 
 __all__ = ["InvariantSet", "best_invariant_set", "invariant_ball", "invariant_box"]
 
@@ -143,7 +143,7 @@ def invariant_ball(
     F_num
         ``F_num(x) -> F(0, x)`` in floats (for the root search only).
     enclose
-        Interval callback for blocks (see :mod:`drip_cert.analysis.interval`).
+        Interval callback for blocks (see :mod:`drip_cert.numerics.interval`).
     """
     support = np.asarray(support, dtype=float)
     n = support.shape[0]

@@ -51,8 +51,8 @@ from flint import arb
 from scipy.optimize import minimize_scalar
 
 from drip_cert.errors import AssumptionViolation, SpecError
+from drip_cert.numerics.rounding import arb_hi, div_up
 from drip_cert.provenance import How, Quantity, json_float, weakest
-from drip_cert.rounding import arb_hi, div_up
 
 __all__ = ["DeltaISSResult", "delta_iss", "discrete_bound"]
 

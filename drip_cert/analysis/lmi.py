@@ -46,11 +46,11 @@ from drip_cert.analysis.contraction import (
     _scope,
     jacobian_function,
 )
-from drip_cert.analysis.interval import EncloseCallback, MatrixEnclosure, UnsupportedExpression
 from drip_cert.analysis.lognorm import lambda_max_upper, mu_2, mu_2_weighted, spectral_abscissa
 from drip_cert.errors import SolverError, SpecError
+from drip_cert.numerics.interval import EncloseCallback, MatrixEnclosure, UnsupportedExpression
+from drip_cert.numerics.rounding import arb_hi
 from drip_cert.provenance import How, Quantity, Scope, json_float
-from drip_cert.rounding import arb_hi
 
 __all__ = [
     "MetricResult",

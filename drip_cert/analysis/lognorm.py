@@ -29,7 +29,7 @@ import sympy as sp
 from flint import arb, arb_mat, fmpq, fmpq_mat
 
 from drip_cert.errors import SpecError
-from drip_cert.rounding import arb_hi, arb_lo, sym_lambda_max_upper
+from drip_cert.numerics.rounding import arb_hi, arb_lo, sym_lambda_max_upper
 
 __all__ = [
     "mu_1",
@@ -120,7 +120,7 @@ def spectral_abscissa(A: np.ndarray) -> np.ndarray:
 # --------------------------------------------------------------------------------------------
 
 
-# _hi / _lo: float ends of an Arb ball, one ulp outward (drip_cert.rounding owns rounding)
+# _hi / _lo: float ends of an Arb ball, one ulp outward (drip_cert.numerics.rounding owns rounding)
 _hi = arb_hi
 _lo = arb_lo
 
@@ -252,7 +252,8 @@ def mu2_interval_upper(lo: np.ndarray, hi: np.ndarray) -> float:
 EXACT_MAX_DIM = 48
 """Largest ``n`` for which :func:`mu2_constant_bounds` takes the exact rational route (the
 characteristic polynomial of a ``48 x 48`` dyadic matrix and its roots take well under a second);
-above it the bounds come from :func:`~drip_cert.rounding.sym_lambda_max_upper` and a Rayleigh
+above it the bounds come from
+:func:`~drip_cert.numerics.rounding.sym_lambda_max_upper` and a Rayleigh
 quotient in Arb (absolute accuracy ``~ n eps ||A||``)."""
 
 
@@ -277,7 +278,7 @@ def _exact_entries(
             raise SpecError(f"expected a square matrix, got shape {C.shape}", field="A")
         Q = [[_fmpq(v) if math.isfinite(v) else fmpq(0) for v in row] for row in C]
         return C, Q, np.zeros_like(C), np.zeros_like(C)
-    from drip_cert.analysis.interval import UnsupportedExpression, enclose_expr
+    from drip_cert.numerics.interval import UnsupportedExpression, enclose_expr
 
     n, m = A.shape
     C, R, Rf = np.zeros((n, m)), np.zeros((n, m)), np.zeros((n, m))
@@ -327,7 +328,7 @@ def _sym_lambda_max_exact(Q: list, n: int) -> tuple[float, float]:
 
 def _sym_lambda_max_float(C: np.ndarray) -> tuple[float, float]:
     """Enclosure of ``lambda_max((C + C^T) / 2)`` for a float ``C`` of any size: ``hi`` from
-    :func:`~drip_cert.rounding.sym_lambda_max_upper`, ``lo`` the Rayleigh quotient
+    :func:`~drip_cert.numerics.rounding.sym_lambda_max_upper`, ``lo`` the Rayleigh quotient
     ``v^T S v / v^T v`` in Arb at the float top eigenvector ``v`` (any ``v`` gives a lower
     bound)."""
     hi = float(sym_lambda_max_upper(C))
@@ -349,11 +350,12 @@ def mu2_constant_bounds(A: np.ndarray | sp.MatrixBase) -> tuple[float, float]:
     are within a few ulps of ``mu_2`` *relative to* ``mu_2`` itself, so a tiny ``mu_2`` keeps its
     sign (a matrix with ``mu_2 = +6.5e-27`` and unit entries gives ``lo > 0``, where ``eigvalsh``
     returns ``0`` or ``-1e-16``). Entries of a sympy matrix that are not rational (``sqrt(2)``,
-    ``pi``) are enclosed in Arb (:func:`~drip_cert.analysis.interval.enclose_expr`); the
+    ``pi``) are enclosed in Arb (:func:`~drip_cert.numerics.interval.enclose_expr`); the
     enclosure's float centre goes through the exact route and its radius ``R`` widens the result by
     ``rho(max(R, R^T))`` (Weyl; bounded by :func:`perron_upper`).
 
-    Above ``EXACT_MAX_DIM``: ``hi`` from :func:`~drip_cert.rounding.sym_lambda_max_upper` and
+    Above ``EXACT_MAX_DIM``: ``hi`` from
+    :func:`~drip_cert.numerics.rounding.sym_lambda_max_upper` and
     ``lo`` from a Rayleigh quotient in Arb (absolute accuracy ``~ n eps ||A||``).
 
     Parameters

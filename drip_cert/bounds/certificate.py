@@ -27,11 +27,11 @@ from drip_cert.analysis.constants import (
 from drip_cert.analysis.contraction import ContractionResult
 from drip_cert.analysis.invariance import InvariantSet, best_invariant_set
 from drip_cert.errors import AssumptionViolation, DripCertError
+from drip_cert.model.system import System
+from drip_cert.numerics.rounding import div_up, mul_up, up
 from drip_cert.provenance import Check, How, Quantity, Scope, Verdict, json_float, verdict_of
-from drip_cert.rounding import div_up, mul_up, up
-from drip_cert.system.settings import ContractionSettings
-from drip_cert.system.spec import Spec
-from drip_cert.system.system import System
+from drip_cert.spec.load import Spec
+from drip_cert.spec.settings import ContractionSettings
 
 
 @dataclass(frozen=True)
@@ -443,7 +443,8 @@ def certify(spec: Spec, *, tasil: Any | None = None) -> Certificate:
         and "tasil" in settings.present
         and gamma0 is not None
     ):
-        from drip_cert.learn.workflow import demonstrations, tasil_section
+        from drip_cert.bounds.tasil_section import tasil_section
+        from drip_cert.learn.imitation import demonstrations
 
         st = settings.tasil
         train = demonstrations(s, st.trajectories, st.samples, st.seed, 0)

@@ -24,10 +24,10 @@ from typing import Any
 import numpy as np
 
 from drip_cert.errors import AssumptionViolation
+from drip_cert.model.system import System
+from drip_cert.numerics.rounding import norm2_up, up_np
 from drip_cert.provenance import How, Quantity
-from drip_cert.rounding import norm2_up, up_np
-from drip_cert.system.settings import ConstantsTable, L1Settings
-from drip_cert.system.system import System
+from drip_cert.spec.settings import ConstantsTable, L1Settings
 
 DEFAULT_EPS = L1Settings().eps_r  #: default slacks eps_r, eps_a of (16a), (16b)
 

@@ -44,8 +44,7 @@ from flint import arb, ctx
 from scipy.stats import beta as beta_dist
 
 from drip_cert.errors import SpecError
-from drip_cert.provenance import Check, How, json_float
-from drip_cert.rounding import (
+from drip_cert.numerics.rounding import (
     add_up,
     arb_hi,
     down_np,
@@ -55,6 +54,7 @@ from drip_cert.rounding import (
     up,
     up_np,
 )
+from drip_cert.provenance import Check, How, json_float
 
 __all__ = [
     "ASSUMPTIONS",
@@ -94,7 +94,8 @@ _EPS = float(np.finfo(np.float64).eps)
 # the gap bounds 2 gamma0 h0 and gamma0 eps*, the cone peaks of _sound_sup) is a sum of
 # NON-NEGATIVE terms (no cancellation) built with at most 15 correctly rounded operations (each
 # relative error <= u = EPS/2) and at most 3 library logarithms log / log1p (each within
-# LIBM_ULPS = 8 EPS of drip_cert.rounding); a relative error e of the argument of log(y), y >= 2,
+# LIBM_ULPS = 8 EPS of drip_cert.numerics.rounding); a relative error e of the argument of
+# log(y), y >= 2,
 # or of log1p(x) gives a relative error <= e / log 2 of the result (log(1+x) >= x/(1+x)), so the
 # total relative error is below 15 u + 3 (8 + 1.5) EPS < 36 EPS; 64 EPS leaves a margin of 1.7.
 # (eps_star and clopper_pearson_upper do not use it: they are bounded by directed rounding and
@@ -177,7 +178,7 @@ def _norms(delta, jac) -> tuple[np.ndarray, np.ndarray]:
     d = np.asarray(delta, dtype=np.float64)
     j = np.asarray(jac, dtype=np.float64)
     if d.ndim == 2:
-        d = norm2_up_np(d, axis=1)  # rigorous upper bounds (drip_cert.rounding)
+        d = norm2_up_np(d, axis=1)  # rigorous upper bounds (drip_cert.numerics.rounding)
     if j.ndim == 3:
         j = np.asarray(spectral_norm_upper(j), dtype=np.float64).reshape(j.shape[0])
     if d.ndim != 1 or j.ndim != 1 or d.shape != j.shape or d.size == 0:

@@ -30,7 +30,7 @@ from drip_cert._jax import jax, jnp
 from drip_cert.errors import SpecError
 from drip_cert.learn.data import DEFAULT_SUBSTEPS, Demonstrations, simulate_closed_loop
 from drip_cert.learn.losses import LossSpec, Targets, expert_targets, imitation_loss
-from drip_cert.learn.mlp import ACTIVATIONS, MLP, apply_params, init_mlp, mlp_from_params
+from drip_cert.model.mlp import ACTIVATIONS, MLP, apply_params, init_mlp, mlp_from_params
 
 METHODS = ("tasil", "bc")
 SCHEDULES = ("constant", "cosine")

@@ -27,7 +27,7 @@ unrolled so that XLA fuses it into the step (:mod:`drip_cert.sim.noise`); a vmap
 ``fold_in`` + ``normal`` per path and step costs more (the benchmark prints both). The numbers
 of a path depend only on the seed, its global index and the step, so neither the chunk size nor
 the number of concurrent workers changes them; the statistics are summed path by path in global
-order (:mod:`drip_cert.sim.stats`), so they do not change either, bit for bit.
+order (:mod:`drip_cert.numerics.stats`), so they do not change either, bit for bit.
 
 Divergence. After every step a path whose state is non-finite or whose norm exceeds
 ``divergence_cap`` is frozen at its last good state and gets a status code (``STATUS_NONFINITE``
@@ -49,7 +49,6 @@ import json
 import math
 import os
 import sys
-import tempfile
 import time
 from collections import deque
 from collections.abc import Callable
@@ -62,8 +61,9 @@ import numpy as np
 from drip_cert._jax import jax, jnp
 from drip_cert.control.l1drac import L1Params, L1State, l1_init, l1_step
 from drip_cert.errors import SpecError
-from drip_cert.sim import stats as _stats
-from drip_cert.sim.model import SimModel
+from drip_cert.model.numeric import SimModel
+from drip_cert.numerics import stats as _stats
+from drip_cert.numerics.atomic_io import atomic_savez, atomic_write_text
 from drip_cert.sim.noise import normals
 
 __all__ = [
@@ -319,9 +319,9 @@ class SimResult:
     times
         Recorded times.
     gaps
-        :class:`~drip_cert.sim.stats.GapStats` per gap of :data:`GAPS` that was simulated.
+        :class:`~drip_cert.numerics.stats.GapStats` per gap of :data:`GAPS` that was simulated.
     w2
-        :class:`~drip_cert.sim.stats.W2Estimate` per (time, pair).
+        :class:`~drip_cert.numerics.stats.W2Estimate` per (time, pair).
     status
         :class:`ScenarioStatus` per scenario.
     sample_paths
@@ -397,8 +397,8 @@ class SimResult:
                 "path_max",
             ):
                 arrays[f"{g.name}.{fld}"] = getattr(g, fld)
-        _atomic_savez(directory / "arrays.npz", arrays)
-        _atomic_write_text(
+        atomic_savez(directory / "arrays.npz", arrays)
+        atomic_write_text(
             directory / "summary.json", json.dumps(self.to_dict(), indent=2, allow_nan=False)
         )
         return directory
@@ -741,24 +741,6 @@ def _settings_hash(model, cfg, x0_sampler, x0_bar_sampler) -> str:
     return hashlib.sha256(json.dumps(payload, sort_keys=True).encode()).hexdigest()
 
 
-def _atomic_write_text(path: Path, text: str) -> None:
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.name + ".", suffix=".tmp")
-    with os.fdopen(fd, "w") as fh:
-        fh.write(text)
-        fh.flush()
-        os.fsync(fh.fileno())
-    os.replace(tmp, path)
-
-
-def _atomic_savez(path: Path, arrays: dict[str, np.ndarray]) -> None:
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.name + ".", suffix=".tmp")
-    with os.fdopen(fd, "wb") as fh:
-        np.savez(fh, **arrays)
-        fh.flush()
-        os.fsync(fh.fileno())
-    os.replace(tmp, path)
-
-
 # ----------------------------------------------------------------------------------------------
 # the driver
 
@@ -778,7 +760,7 @@ def simulate(
     Parameters
     ----------
     model
-        The :class:`~drip_cert.sim.model.SimModel`.
+        The :class:`~drip_cert.model.numeric.SimModel`.
     config
         :class:`SimConfig`.
     x0_sampler
@@ -806,7 +788,7 @@ def simulate(
     SimResult
     """
     if not isinstance(model, SimModel):
-        raise SpecError("model must be a SimModel (see drip_cert.sim.model.make_model)")
+        raise SpecError("model must be a SimModel (see drip_cert.model.numeric.make_model)")
     if not isinstance(config, SimConfig):
         raise SpecError("config must be a SimConfig")
     cfg = config
@@ -838,7 +820,7 @@ def simulate(
                 with np.load(rdir / _STATE_FILE, allow_pickle=False) as data:
                     state = _state_from_arrays(dict(data.items()), state)
         else:
-            _atomic_write_text(
+            atomic_write_text(
                 sfile,
                 json.dumps(
                     {"settings_hash": h, "model": model.name, "config": cfg.to_dict()}, indent=2
@@ -887,7 +869,7 @@ def simulate(
             codes = np.concatenate([o[1] for o in outs], axis=1)[:, : idx.size]
             st = _absorb(st, cfg, idx.astype(np.int64), recs, codes)
             if rdir is not None:
-                _atomic_savez(rdir / _STATE_FILE, _state_arrays(st))
+                atomic_savez(rdir / _STATE_FILE, _state_arrays(st))
             bar.update(1)
             return st
 

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from drip_cert.learn.mlp import init_mlp
+from drip_cert.model.mlp import init_mlp
 
 SEED = 4
 mlp = init_mlp([4, 16, 4], np.random.default_rng(SEED), activation="tanh")

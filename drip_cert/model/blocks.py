@@ -6,7 +6,7 @@ from jax autodiff. Inside sympy expressions component ``j`` of block ``h`` appli
 :class:`BlockFunction` subclass made for that block. Differentiating it gives the
 applied Jacobian entry ``h__d0_1(...)``, and once more the Hessian entry ``h__dd0_1_2(...)``,
 so sympy's chain rule builds closed-loop Jacobians that contain blocks, and
-:mod:`drip_cert.system.lower` turns them into jax functions that evaluate each block once.
+:mod:`drip_cert.model.lower` turns them into jax functions that evaluate each block once.
 """
 
 from __future__ import annotations
@@ -20,7 +20,7 @@ import numpy as np
 import sympy as sp
 
 from drip_cert.errors import SpecError
-from drip_cert.learn.mlp import MLP, load_mlp
+from drip_cert.model.mlp import MLP, load_mlp
 
 
 class BlockFunction(sp.Function):
@@ -144,7 +144,7 @@ class Block:
 
 
 def mlp_block(name: str, mlp: MLP, source: str = "") -> Block:
-    """Wrap an :class:`~drip_cert.learn.mlp.MLP` as a block."""
+    """Wrap an :class:`~drip_cert.model.mlp.MLP` as a block."""
     return Block(
         name=name, in_dim=mlp.in_dim, out_dim=mlp.out_dim, fn=mlp.apply_jax, mlp=mlp, source=source
     )

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import sympy as sp
 
-from drip_cert.system.blocks import Block, BlockFunction, block_applications
+from drip_cert.model.blocks import Block, BlockFunction, block_applications
 
 
 @dataclass(frozen=True)

@@ -24,8 +24,8 @@ import numpy as np
 import sympy as sp
 
 from drip_cert.errors import SpecError
-from drip_cert.system.blocks import Block, block_applications
-from drip_cert.system.lower import lower
+from drip_cert.model.blocks import Block, block_applications
+from drip_cert.model.lower import lower
 
 RANK_TOL = 1e-10  #: relative singular-value threshold for the full-column-rank check of g
 
@@ -278,13 +278,40 @@ class System:
         return lower(exprs, self.t, self.states, self.blocks)
 
     @cached_property
+    def theta_ad(self) -> sp.ImmutableMatrix:
+        """``Theta_ad(t) = [I_m 0] gbar(t)^{-1} = (g^T g)^{-1} g^T`` (L1-DRAC Assumption 1).
+
+        With ``gbar = [g, g_perp]`` and ``Im g_perp = ker g^T``, any ``v = g a + g_perp b`` has
+        ``g^T v = g^T g a``, so the first m rows of ``gbar^{-1}`` are the pseudo-inverse of ``g``
+        whatever basis ``g_perp`` is chosen (docs/math/l1drac.md).
+        """
+        g = sp.Matrix(self.g)
+        gtg = g.T * g
+        inv = gtg.inv() if self.g_is_constant else sp.simplify(gtg.inv())
+        return sp.ImmutableMatrix(sp.simplify(inv * g.T))
+
+    @cached_property
+    def perp_projector(self) -> sp.ImmutableMatrix:
+        """``P_perp(t) = I - g(t) Theta_ad(t) = g_perp(t) g_perp(t)^T``, the orthogonal projector
+        onto ``ker g(t)^T``.
+
+        For orthonormal ``g_perp``, ``||g_perp^T v|| = ||P_perp v||`` and
+        ``||g_perp^T M||_F = ||P_perp M||_F`` (``P_perp^T P_perp = P_perp``), so every growth and
+        regularity constant of the unmatched part ``g_perp^T Lambda`` (L1-DRAC (7)) equals that of
+        ``P_perp Lambda``, a closed form in ``t`` even when ``g`` varies with time (no basis has to
+        be chosen at each ``t``).
+        """
+        g = sp.Matrix(self.g)
+        return sp.ImmutableMatrix(sp.eye(self.n) - g * sp.Matrix(self.theta_ad))
+
+    @cached_property
     def numeric(self) -> NumericSystem:
         """jax callables of every part of the system (built once, lazily)."""
         return NumericSystem.build(self)
 
     def sim_model(self):
-        """The :class:`~drip_cert.sim.model.SimModel` of this system for the Monte-Carlo engine."""
-        from drip_cert.sim.model import SimModel
+        """The :class:`~drip_cert.model.numeric.SimModel` of this system (the engine's view)."""
+        from drip_cert.model.numeric import SimModel
 
         num = self.numeric
         return SimModel(
@@ -428,9 +455,7 @@ class NumericSystem:
         jac_e = s.lower(s.closed_loop_jacobian("expert"))
         jac_l = None if s.learned is None else s.lower(s.closed_loop_jacobian("learned"))
 
-        from drip_cert.analysis.constants import theta_ad_symbolic
-
-        th = s.lower(theta_ad_symbolic(s))
+        th = s.lower(s.theta_ad)
         return NumericSystem(
             f=f,
             g=lambda t: g_fn(t, jnp.zeros(n)),

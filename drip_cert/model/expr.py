@@ -24,7 +24,7 @@ from collections.abc import Mapping, Sequence
 import sympy as sp
 
 from drip_cert.errors import SpecError
-from drip_cert.system.blocks import Block
+from drip_cert.model.blocks import Block
 
 #: Elementary functions accepted in expressions, with their sympy counterparts.
 FUNCTIONS: Mapping[str, object] = {

@@ -22,7 +22,8 @@ Soundness of the rounding
   ``1 + erf(u) -> erfc(-u)`` and ``1 - erf(u) -> erfc(u)`` (GELU). The natural extension of the
   left side is rigorous as well, but keeps no relative accuracy where it cancels.
 
-The rounding primitives are those of :mod:`drip_cert.rounding` (which states the guarantee).
+The rounding primitives are those of :mod:`drip_cert.numerics.rounding` (which states the
+guarantee).
 
 Applied undefined functions (sympy ``Function('h')(x1, x2)``, their ``Derivative`` and ``Subs``
 forms, standing for neural-network blocks) are passed to a user callback
@@ -43,7 +44,7 @@ from flint import arb
 from sympy.core.function import AppliedUndef
 
 from drip_cert.errors import DripCertError
-from drip_cert.rounding import arb_hi, arb_lo, enclose_down, enclose_up
+from drip_cert.numerics.rounding import arb_hi, arb_lo, enclose_down, enclose_up
 
 __all__ = [
     "UnsupportedExpression",
@@ -72,7 +73,7 @@ class UnsupportedExpression(DripCertError, NotImplementedError):
 
 
 # --------------------------------------------------------------------------------------------
-# outward rounding (owned by drip_cert.rounding; NaN from inf - inf means "no information")
+# outward rounding (owned by drip_cert.numerics.rounding; NaN from inf - inf means "no information")
 # --------------------------------------------------------------------------------------------
 
 _dn = enclose_down
@@ -365,7 +366,7 @@ def _const(value: sp.Expr) -> Interval:
 
 def _is_opaque_call(node: sp.Basic) -> bool:
     """A function application with no interval extension here (an undefined function, or a
-    ``sympy.Function`` subclass such as the blocks of :mod:`drip_cert.system.blocks`)."""
+    ``sympy.Function`` subclass such as the blocks of :mod:`drip_cert.model.blocks`)."""
     if isinstance(node, AppliedUndef):
         return True
     return isinstance(node, sp.Function) and node.func not in _KNOWN_HEADS

@@ -1,6 +1,6 @@
 """Typed settings of a specification: one frozen object per settings table, validated at load.
 
-:func:`~drip_cert.system.spec.load_spec` builds a :class:`Settings` from the optional tables
+:func:`~drip_cert.spec.load.load_spec` builds a :class:`Settings` from the optional tables
 
 * ``[contraction]`` -> :class:`ContractionSettings` (the contraction analysis),
 * ``[l1drac]`` -> :class:`L1Settings` (the L1-DRAC design inputs),

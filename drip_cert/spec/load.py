@@ -4,7 +4,7 @@ The format (documented in the README) has the sections ``[system]``, ``[dynamics
 ``[policy]``, ``[blocks.NAME]``, ``[uncertainty]``, ``[initial]``, and the optional settings
 tables ``[constants]`` (user-given values of paper constants), ``[contraction]``,
 ``[l1drac]``, ``[tasil]`` and ``[simulation]``, each read into its typed settings object of
-:mod:`drip_cert.system.settings` when the spec is loaded (``spec.settings``), so that a bad value
+:mod:`drip_cert.spec.settings` when the spec is loaded (``spec.settings``), so that a bad value
 or an unknown key is found before anything is computed. Every problem is a
 :class:`~drip_cert.errors.SpecError` naming the file, the field and the fix.
 """
@@ -22,10 +22,10 @@ from typing import Any
 import sympy as sp
 
 from drip_cert.errors import SpecError
-from drip_cert.system.blocks import Block, load_mlp_block
-from drip_cert.system.expr import CONSTANTS, FUNCTIONS, parse_expression
-from drip_cert.system.settings import TABLES, Settings
-from drip_cert.system.system import System
+from drip_cert.model.blocks import Block, load_mlp_block
+from drip_cert.model.expr import CONSTANTS, FUNCTIONS, parse_expression
+from drip_cert.model.system import System
+from drip_cert.spec.settings import TABLES, Settings
 
 SECTIONS = {
     "system": {"name", "states", "inputs", "horizon", "time", "brownian_dim"},
@@ -34,7 +34,7 @@ SECTIONS = {
     "blocks": None,  # table of tables, checked per block
     "uncertainty": {"drift", "diffusion", "Delta_mu", "Delta_sigma"},
     "initial": {"support", "true_support"},
-    # the settings tables: checked key by key by drip_cert.system.settings
+    # the settings tables: checked key by key by drip_cert.spec.settings
     "constants": None,
     "contraction": None,
     "l1drac": None,

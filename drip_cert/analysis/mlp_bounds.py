@@ -6,7 +6,7 @@ Lipschitz constant of its Jacobian (equivalently, the second-order Taylor remain
 ``||pi(z) - pi(z0) - dpi(z0)(z - z0)|| <= L_dpi/2 ||z - z0||^2``). For the TaSIL certificate
 (docs/math/tasil.md section 3.1, assumption A2) ``L_Delta <= L_dpi(pi_hat) + L_dpi(pi_star)``.
 
-Network convention (:class:`drip_cert.learn.mlp.MLP`): ``z_0 = x``, ``a_k = W_k z_k + b_k``,
+Network convention (:class:`drip_cert.model.mlp.MLP`): ``z_0 = x``, ``a_k = W_k z_k + b_k``,
 ``z_{k+1} = s_k(a_k)`` where ``s_k`` is the hidden activation for ``k < L-1`` and the output
 activation (identity when ``None``) for ``k = L-1``. All norms are Euclidean / spectral.
 
@@ -20,9 +20,10 @@ gelu     [-0.12893, 1.12893]       1.12893               sqrt(2/pi) ~ 0.79788
 identity [1, 1]                    1                     0
 ======== ======================== ====================== ============================
 
-Floating-point soundness (:mod:`drip_cert.rounding` owns the rules): the activation constants are
+Floating-point soundness (:mod:`drip_cert.numerics.rounding` owns the rules): the activation
+constants are
 evaluated in Arb; spectral norms are rigorous upper bounds
-(:func:`~drip_cert.rounding.spectral_norm_upper`), every product and sum of the Lipschitz
+(:func:`~drip_cert.numerics.rounding.spectral_norm_upper`), every product and sum of the Lipschitz
 recursions is rounded up, and the LipSDP certificate is re-checked with a rigorous upper bound of
 the largest eigenvalue of the LMI matrix (its float assembly error bounded entrywise). The
 interval enclosures use directed rounding for every arithmetic operation and the
@@ -31,8 +32,9 @@ cancellation-free forms ``tanh' = sech^2 = 4 e^{-2|z|} / (1 + e^{-2|z|})^2`` and
 left tail) -- never ``1 - tanh^2`` or ``1 + erf``, which cancel to 0 for large ``|z|`` (then the
 exact value lies outside any relative pad). They evaluate ``exp``, ``tanh`` and ``ndtr`` in
 float (vectorised over boxes and neurons) and widen each result by the documented error budget of
-those library functions (:data:`~drip_cert.rounding.LIBM_REL`,
-:func:`~drip_cert.rounding.ndtr_rel_budget`, checked against mpmath in ``tests/test_rounding.py``):
+those library functions (:data:`~drip_cert.numerics.rounding.LIBM_REL`,
+:func:`~drip_cert.numerics.rounding.ndtr_rel_budget`, checked against mpmath in
+``tests/test_rounding.py``):
 sound as long as numpy and scipy meet their documented accuracy.
 """
 
@@ -47,9 +49,8 @@ from flint import arb
 from scipy.special import ndtr
 
 from drip_cert.errors import SpecError
-from drip_cert.learn.mlp import MLP, activation_fn
-from drip_cert.provenance import Check, How, Quantity
-from drip_cert.rounding import (
+from drip_cert.model.mlp import MLP, activation_fn
+from drip_cert.numerics.rounding import (
     LIBM_REL,
     add_up,
     add_up_np,
@@ -68,6 +69,7 @@ from drip_cert.rounding import (
     up_np,
     widen_np,
 )
+from drip_cert.provenance import Check, How, Quantity
 
 __all__ = [
     "ActivationBounds",
@@ -227,7 +229,8 @@ def _layer_activations(mlp: MLP) -> list[ActivationBounds]:
 
 
 def _spec_norm(w: np.ndarray) -> float:
-    """Rigorous upper bound of ``||W||_2`` (:func:`~drip_cert.rounding.spectral_norm_upper`)."""
+    """Rigorous upper bound of ``||W||_2``
+    (:func:`~drip_cert.numerics.rounding.spectral_norm_upper`)."""
     return float(spectral_norm_upper(w))
 
 
@@ -371,7 +374,7 @@ def lipschitz_lipsdp(
     iff ``S < 0`` and ``rho >= lambda_max(P - Q S^{-1} Q^T)`` (Schur complement). The smallest
     such ``rho``, raised by ``1e-7`` relative, is then verified rigorously: ``M`` is assembled in
     float with an entrywise bound of its rounding error and
-    :func:`~drip_cert.rounding.sym_lambda_max_upper` must prove ``lambda_max(M) < 0``.
+    :func:`~drip_cert.numerics.rounding.sym_lambda_max_upper` must prove ``lambda_max(M) < 0``.
     Any non-``optimal`` status, solver exception or failed re-check gives ``value=None``; callers
     fall back to the product bound. An output activation multiplies the bound by its ``sup|s'|``.
 
@@ -602,7 +605,8 @@ def _exp_bounds(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 def _Phi_bounds(z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Enclosure of the normal CDF ``Phi(z)`` (scipy ``ndtr``: ``erfc`` in the tails, no
-    cancellation) widened by its error budget :func:`~drip_cert.rounding.ndtr_rel_budget`."""
+    cancellation) widened by its error budget
+    :func:`~drip_cert.numerics.rounding.ndtr_rel_budget`."""
     lo, hi = widen_np(ndtr(z), ndtr_rel_budget(z))
     return np.clip(lo, 0.0, 1.0), np.clip(hi, 0.0, 1.0)
 

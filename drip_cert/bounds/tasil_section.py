@@ -1,0 +1,210 @@
+"""The TaSIL section of the certificate: sound ``h_0, h_1`` along the expert trajectories, the
+regularity constant ``L_Delta`` with its provenance, and the certificate of docs/math/tasil.md
+sections 3-4 (this project's construction, not TaSIL's own constant).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from drip_cert.analysis.policy_regularity import jacobian_lipschitz
+from drip_cert.learn.data import Demonstrations
+from drip_cert.learn.imitation import nominal_field
+from drip_cert.model.system import System
+from drip_cert.numerics.rounding import add_up
+from drip_cert.provenance import How, Quantity
+from drip_cert.spec.settings import TasilSettings
+
+__all__ = ["tasil_section", "trajectory_h"]
+
+TAU_MARGIN = 1.25
+#: held-out thresholds tau_j = 1.25 x the training maxima of h_j: any tau computed from the training
+#: data is valid for the held-out form (docs/math/tasil.md 3.3 c); the bare maxima are exceeded by
+#: about 1/n of fresh states, which alone spends the form's confidence budget
+
+
+def trajectory_h(s: System, demos: Demonstrations, L_Delta: float, speed_sound: bool):
+    """Per-trajectory sound ``(h_0, h_1)`` of ``Delta = pi_IL - pi*`` along expert trajectories.
+
+    Between grid points the speed of an autonomous contracting closed loop does not grow
+    (``d/dt x_dot = J x_dot`` and ``mu_2(J) < 0``), so ``||x_dot(t)|| <= ||x_dot(t_k)||`` on
+    ``[t_k, t_{k+1}]``; this makes the Lipschitz correction of docs/math/tasil.md section 4 sound
+    when the expert contracts wherever its trajectories go (``speed_sound``: the rate holds for all
+    ``x``, or on a box that contains a proved forward-invariant set around the support) and ``f``
+    does not depend on ``t``. Otherwise the grid maximum of the speed is used and the result is
+    labelled an estimate.
+    """
+    from drip_cert._jax import jax, jnp
+    from drip_cert.bounds.tasil import h_continuous
+
+    num = s.numeric
+    delta = jax.jit(jax.vmap(lambda z: num.learned(z) - num.expert(z)))
+    jac = jax.jit(jax.vmap(jax.jacfwd(lambda z: num.learned(z) - num.expert(z))))
+    field = nominal_field(s)
+    speed_fn = jax.jit(jax.vmap(lambda z: jnp.linalg.norm(field(0.0, z, num.expert(z)))))
+    autonomous = not any(s.t in e.free_symbols for e in s.f) and s.g_is_constant
+    sound = speed_sound and autonomous
+    hs = []
+    for traj in demos.states:
+        X = jnp.asarray(traj)
+        d = np.asarray(delta(X))
+        j = np.asarray(jac(X))
+        sp_ = np.asarray(speed_fn(X))
+        speed = sp_[:-1] if sound else np.maximum(sp_[:-1], sp_[1:])
+        hs.append(h_continuous(demos.times, d, j, speed, L_Delta))
+    how = How.SOUND if sound else How.ESTIMATE
+    return hs, how
+
+
+def tasil_section(
+    s: System,
+    train: Demonstrations,
+    heldout: Demonstrations | None,
+    gamma0: Quantity,
+    settings: TasilSettings,
+    *,
+    room: float = math.inf,
+    speed_sound: bool = False,
+    method: str = "tasil-1",
+):
+    """The TaSIL certificate of ``s.learned`` (docs/math/tasil.md sections 3-4).
+
+    Parameters
+    ----------
+    gamma0
+        The linear delta-ISS gain of the expert closed loop (tighter comparison bound).
+    room
+        How far the learned trajectory may stray from the expert's before leaving the region
+        where the expert's rate is proved (``inf`` for a global rate; the room of a proved
+        forward-invariant ball otherwise, :mod:`drip_cert.analysis.invariance`). The lemma's tube
+        radius ``R`` is capped below it, so that the gap bound keeps the learned trajectory there.
+    speed_sound
+        Whether the expert's speed is proved non-increasing along its trajectories (the rate holds
+        wherever they go), which makes the continuous-time sups of ``h_0, h_1`` sound.
+
+    Returns
+    -------
+    (TasilCertificate, provenance dict, quantities)
+        ``quantities`` are the inputs the TaSIL check rests on (``L_dpi_*``, ``h0``, ``h1``), each
+        with its computed label. ``L_Delta = L_dpi(pi_IL) + L_dpi(pi*)`` (triangle inequality).
+    """
+    from drip_cert.bounds.tasil import tasil_certificate
+
+    # the tube of assumption A2: the box around all expert states, enlarged by the tube radius
+    # (1 when no finite radius is set); region-limited bounds then cap R at that radius
+    margin = settings.tube_radius if math.isfinite(settings.tube_radius) else 1.0
+    pts = train.states.reshape(-1, s.n)
+    box = np.stack([pts.min(axis=0) - margin, pts.max(axis=0) + margin], axis=1)
+    L_il = jacobian_lipschitz(s, "learned", box)
+    L_ex = jacobian_lipschitz(s, "expert", box)
+    R = settings.tube_radius
+    if not (L_il.scope.all_x and L_ex.scope.all_x):
+        R = min(R, margin)
+    if math.isfinite(room):
+        # strictly below the room (the first-exit argument needs gap < room)
+        R = min(R, math.nextafter(room, 0.0))
+    L_Delta = Quantity.derive(
+        "L_Delta",
+        add_up(L_il.value, L_ex.value),
+        inputs=[L_il, L_ex],
+        source="DRIP Assumption PolicyRegularity (b)",
+        note="L_dpi(pi_IL) + L_dpi(pi*)",
+    )
+    provenance = {
+        "L_dpi_learned": L_il.to_dict(),
+        "L_dpi_expert": L_ex.to_dict(),
+        "gamma0": gamma0.to_dict(),
+        "tube_radius_R": R,
+        "room": room,
+    }
+    qs: list[Quantity] = [gamma0, L_il, L_ex]
+    if not math.isfinite(L_Delta.value):
+        return (
+            _not_lipschitz(
+                L_il if not math.isfinite(L_il.value) else L_ex,
+                train,
+                heldout,
+                gamma0,
+                R,
+                settings,
+                method,
+            ),
+            provenance,
+            tuple(qs),
+        )
+    h_train, how_t = trajectory_h(s, train, L_Delta.value, speed_sound)
+    h_val, _ = (
+        trajectory_h(s, heldout, L_Delta.value, speed_sound)
+        if heldout is not None
+        else (None, how_t)
+    )
+    # thresholds computed from the training data only (valid for the held-out form): the
+    # training maxima with a 25 % margin, so that fresh states rarely exceed them
+    tau = (TAU_MARGIN * max(h.h0 for h in h_train), TAU_MARGIN * max(h.h1 for h in h_train))
+    cert = tasil_certificate(
+        [h.h0 for h in h_train],
+        [h.h1 for h in h_train],
+        gamma0=gamma0.value,
+        tau=tau,
+        L_Delta=L_Delta.value,
+        delta=settings.delta,
+        eta=settings.eta,
+        R=R,
+        heldout_h0=None if h_val is None else [h.h0 for h in h_val],
+        heldout_h1=None if h_val is None else [h.h1 for h in h_val],
+        method=method,
+        continuous=True,
+    )
+    provenance["h_how"] = how_t.value
+    h_note = (
+        "continuous-time sup along the expert trajectories (docs/math/tasil.md section 4)"
+        if how_t == How.SOUND
+        else "grid values with an unproved speed bound between grid points: an estimate"
+    )
+    for name, val in (("h0", cert.h0), ("h1", cert.h1)):
+        qs.append(
+            Quantity.derive(
+                name,
+                val,
+                inputs=[L_Delta],
+                method=how_t,
+                source="docs/math/tasil.md (A3)",
+                note=h_note,
+            )
+        )
+    return cert, provenance, tuple(qs)
+
+
+def _not_lipschitz(
+    L: Quantity, train, heldout, gamma0: Quantity, R: float, settings: TasilSettings, method: str
+):
+    """The TaSIL certificate when a policy's Jacobian has no Lipschitz constant: every form
+    fails (DRIP Assumption PolicyRegularity (b)); ``h_0``, ``h_1`` are not computed (their sound
+    continuous-time sups need ``L_Delta``)."""
+    from drip_cert.bounds.tasil import FORMS, TasilCertificate, TasilForm
+
+    why = f"DRIP Assumption PolicyRegularity (b) fails for {L.name}: {L.note}"
+    forms = tuple(TasilForm(name, math.inf, False, True, "not computed: " + why) for name in FORMS)
+    return TasilCertificate(
+        method=method,
+        h0=math.nan,
+        h1=math.nan,
+        gamma0=gamma0.value,
+        L_Delta=math.inf,
+        eta=settings.eta,
+        R=R,
+        gap_bound=math.inf,
+        gap_reason=why,
+        rho=math.inf,
+        rho_form="held_out" if heldout is not None else "drip_shaped",
+        delta=settings.delta,
+        n=int(train.states.shape[0]),
+        n_val=0 if heldout is None else int(heldout.states.shape[0]),
+        tau0=math.nan,
+        tau1=math.nan,
+        forms=forms,
+        vacuous_forms=FORMS,
+        continuous=True,
+    )
