@@ -27,8 +27,9 @@ from drip_cert._jax import jax, jnp
 from drip_cert.control.l1drac import L1Params
 from drip_cert.model.mlp import MLP, init_mlp
 from drip_cert.model.numeric import SimModel, make_model
-from drip_cert.sim.engine import SCENARIOS, SimConfig, _default_workers, simulate
-from drip_cert.sim.noise import normals
+from drip_cert.sim.config import SCENARIOS, SimConfig
+from drip_cert.sim.engine import default_workers, simulate
+from drip_cert.sim.noise import normals, normals_via_jax
 
 N = 4
 
@@ -128,19 +129,6 @@ def numpy_loop(
     return elapsed, x
 
 
-def _jax_normals(key, idx, j):
-    """The engine's normals through ``jax.extend.random.threefry_2x32`` (a rolled loop on CPU)."""
-    from jax.extend.random import threefry_2x32
-
-    b = idx.shape[0]
-    w0 = jnp.broadcast_to(idx[:, None], (b, N)).reshape(-1)
-    w1 = jnp.broadcast_to((j * N + jnp.arange(N, dtype=jnp.uint32))[None, :], (b, N)).reshape(-1)
-    out = threefry_2x32(key, jnp.concatenate([w0, w1]))
-    bits = (out[: b * N].astype(jnp.uint64) << jnp.uint64(32)) | out[b * N :].astype(jnp.uint64)
-    u = ((bits >> jnp.uint64(11)).astype(jnp.float64) + 0.5) * (2.0**-52) - 1.0
-    return (math.sqrt(2.0) * jax.scipy.special.erfinv(u)).reshape(b, N)
-
-
 def _ablation(cfg: SimConfig) -> None:
     """ns per path-step of the engine (all workers) with one ingredient removed at a time."""
     variants = {
@@ -187,7 +175,7 @@ def _micro(pol: MLP, n_paths: int, n_steps: int) -> None:
     parts = {
         "rng: engine (unrolled threefry + erfinv)": lambda x, j: x + 1e-3 * normals(key, idx, j, N),
         "rng: jax threefry_2x32 primitive + erfinv": lambda x, j: (
-            x + 1e-3 * _jax_normals(key, idx, j)
+            x + 1e-3 * normals_via_jax(key, idx, j, N)
         ),
         "rng: vmapped fold_in + normal per path": lambda x, j: (
             x + 1e-3 * jax.vmap(lambda k: jax.random.normal(jax.random.fold_in(k, j), (N,)))(keys)
@@ -232,7 +220,7 @@ def main(argv: list[str] | None = None) -> int:
     print(f"system {model.name}: {n_paths} paths, T={T}, dt={dt}, {n_steps} steps")
     res = simulate(model, cfg, x0_sampler, progress=False)
     eng = n_paths * n_steps / res.run_s
-    workers = _default_workers()
+    workers = default_workers()
     print(
         f"  engine ({workers} workers): compile {res.compile_s:.2f} s, run {res.run_s:.2f} s "
         f"-> {eng:.3g} steps/s"

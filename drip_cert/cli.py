@@ -14,7 +14,7 @@ import sys
 from collections.abc import Callable, Sequence
 from typing import Any
 
-from drip_cert.errors import AssumptionViolation, DripCertError, InfeasibleDesign, SpecError
+from drip_cert.errors import AssumptionViolation, DripCertError, SpecError
 
 
 def _print_json(obj: Any) -> None:
@@ -46,7 +46,7 @@ def cmd_certify(args: argparse.Namespace) -> int:
     from drip_cert.spec import load_spec
 
     spec = load_spec(args.spec)
-    cert = certify(spec)
+    cert = certify(spec, progress=not (args.json or args.quiet))
     accepted = cert.certified or (args.allow_estimates and cert.verdict.value == "conditional")
     if args.json:
         out = cert.to_dict()
@@ -70,7 +70,7 @@ def cmd_certify(args: argparse.Namespace) -> int:
 
 
 def cmd_design_l1(args: argparse.Namespace) -> int:
-    from drip_cert.bounds.l1drac_toml import design_l1_report
+    from drip_cert.bounds.l1drac.toml import design_l1_report
 
     report = design_l1_report(args.constants)
     if args.json:
@@ -105,7 +105,7 @@ def cmd_train(args: argparse.Namespace) -> int:
 
 
 def cmd_validate(args: argparse.Namespace) -> int:
-    from drip_cert.validate import validate_spec
+    from drip_cert.workflows import validate_spec
 
     report = validate_spec(
         args.spec,
@@ -117,13 +117,13 @@ def cmd_validate(args: argparse.Namespace) -> int:
         progress=not args.json,
     )
     if args.json:
-        _print_json(report)
+        _print_json(report.to_dict())
     else:
         from drip_cert.report import validation_text
 
-        print(validation_text(report))
+        print(validation_text(report.to_dict()))
     # exit 0 only when a finite bound was checked and none is violated (not "nothing checked")
-    return 0 if report["status"] == "holds" else 1
+    return 0 if report.status == "holds" else 1
 
 
 def cmd_reproduce(args: argparse.Namespace) -> int:
@@ -160,6 +160,7 @@ def build_parser() -> argparse.ArgumentParser:
         action="store_true",
         help="exit 0 for a conditional verdict too (one resting on estimates or unproved regions)",
     )
+    q.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     q.set_defaults(func=cmd_certify)
 
     q = sub.add_parser("design-l1", help="L1-DRAC parameter feasibility from a constants file")
@@ -179,8 +180,13 @@ def build_parser() -> argparse.ArgumentParser:
 
     q = sub.add_parser("validate", help="check a certificate against Monte-Carlo simulation")
     q.add_argument("spec")
-    q.add_argument("--trajectories", type=_posint, default=1000)
-    q.add_argument("--seed", type=int, default=0)
+    q.add_argument("--trajectories", type=_posint, default=1000, help="simulated paths")
+    q.add_argument(
+        "--seed",
+        type=int,
+        default=None,
+        help="one seed for demonstrations, training and simulation (default: [tasil] seed)",
+    )
     q.add_argument("--out", default=None)
     q.add_argument(
         "--practical-ts",
@@ -222,7 +228,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     except SpecError as exc:
         print(f"drip-cert: error: {exc}", file=sys.stderr)
         return 2
-    except (AssumptionViolation, InfeasibleDesign) as exc:
+    except AssumptionViolation as exc:
         print(f"drip-cert: not certified: {exc}", file=sys.stderr)
         return 1
     except DripCertError as exc:

@@ -2,8 +2,9 @@
 
 Every exception a user can provoke by a mistake in their input is a :class:`DripCertError`;
 the command line turns these into a message on stderr and exit status 2 (bad input) or 1
-(an assumption that fails, a design that is infeasible), never a traceback. Each subclass
-also subclasses the matching builtin so that generic ``except ValueError`` code keeps working.
+(an assumption that fails), never a traceback; an infeasible L1-DRAC design is a result, not an
+exception (``L1Design.feasible``, exit status 1). Each subclass also subclasses the matching
+builtin so that generic ``except ValueError`` code keeps working.
 """
 
 from __future__ import annotations
@@ -34,10 +35,6 @@ class SpecError(DripCertError, ValueError):
 
 class AssumptionViolation(DripCertError, ArithmeticError):
     """An assumption of the papers fails for the given system (exit status 1)."""
-
-
-class InfeasibleDesign(DripCertError, ArithmeticError):
-    """No L1-DRAC design satisfies the paper's conditions with the given inputs (exit status 1)."""
 
 
 class SolverError(DripCertError, RuntimeError):

@@ -1,4 +1,11 @@
-"""End-to-end jobs behind the command line: ``train`` and ``reproduce paper-4d``.
+"""One pipeline, train -> certify -> simulate -> validate, behind ``train``, ``validate``,
+``reproduce`` and the gallery.
+
+:func:`run_pipeline` draws the expert demonstrations ONCE from one seed, trains on them, hands the
+same demonstrations to :func:`~drip_cert.bounds.certificate.certify` (so the TaSIL bound is about
+the data the policy was trained on) and simulates with the same seed. A spec that brings its own
+learned policy is certified on the demonstrations its ``[tasil]`` settings describe (the draw
+``drip-cert train`` makes with them).
 
 :func:`reproduce` runs the DRIP paper's numerical experiment (Section "Numerical Experiments")
 from the bundled example: train TaSIL (order 1) and BC on 20 expert trajectories, certify, simulate
@@ -14,30 +21,211 @@ import dataclasses
 import json
 import math
 import time
+from collections.abc import Mapping
+from importlib import resources
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from drip_cert.errors import SpecError
+from drip_cert.numerics.atomic_io import atomic_write_json, atomic_write_text, jsonable
+from drip_cert.progress import Stages
+from drip_cert.spec.load import Spec
 
-EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
-PAPER_SPEC = EXAMPLES / "paper_4d" / "paper_4d.toml"
+if TYPE_CHECKING:
+    from drip_cert.bounds.certificate import Certificate
+    from drip_cert.learn.imitation import DemonstrationSet, TrainedPolicy
+    from drip_cert.validate import ValidationReport
+
 GROWTH_FACTOR = 2.0
 #: claim (ii) "the gap grows": the final mean gap of case (ii) exceeds this factor times its value
 #: at t = T/10 ... and claim (iii) "stays bounded": its max is below 1/this of case (ii)'s max
 
+#: bundled experiments: name -> (package data folder, spec file)
+EXPERIMENTS = {"paper-4d": ("paper_4d", "paper_4d.toml")}
 
-def _spec_path_packaged(name: str) -> Path:
-    if name != "paper-4d":
-        raise SpecError(f"unknown experiment {name!r}; available: paper-4d")
-    if not PAPER_SPEC.is_file():
+
+def bundled_spec(name: str) -> Path:
+    """Path of a bundled experiment's spec, from the installed package's data (no checkout
+    needed)."""
+    if name not in EXPERIMENTS:
+        raise SpecError(f"unknown experiment {name!r}; available: {', '.join(EXPERIMENTS)}")
+    folder, file = EXPERIMENTS[name]
+    path = Path(str(resources.files("drip_cert") / "data" / folder / file))
+    if not path.is_file():
         raise SpecError(
-            f"the bundled example {PAPER_SPEC} is missing (run from a source checkout of drip-cert)"
+            f"the bundled example {path} is missing from the installed package: reinstall "
+            "drip-cert (pip install --force-reinstall drip-cert)"
         )
-    return PAPER_SPEC
+    return path
 
 
+# ---------------------------------------------------------------------------- the pipeline
+@dataclasses.dataclass(frozen=True)
+class PipelineResult:
+    """What one run of :func:`run_pipeline` produced.
+
+    ``spec`` carries the learned system (trained, or the spec's own); ``trained`` maps each
+    training method to its :class:`~drip_cert.learn.imitation.TrainedPolicy` (empty when
+    nothing was trained; the first method is the one certified); ``heldout_gaps`` maps each
+    method to the per-trajectory max gaps on the held-out initial states; ``validations`` has one
+    report per entry of ``paths``.
+    """
+
+    spec: Spec
+    seed: int
+    demonstrations: DemonstrationSet | None
+    trained: Mapping[str, TrainedPolicy]
+    heldout_gaps: Mapping[str, np.ndarray]
+    certificate: Certificate | None
+    validations: tuple[ValidationReport, ...]
+    timings: Mapping[str, float]
+    notes: tuple[str, ...]
+
+
+def run_pipeline(
+    spec: Spec,
+    *,
+    seed: int | None = None,
+    train: bool | None = None,
+    methods: tuple[str, ...] | None = None,
+    tasil: Mapping[str, Any] | None = None,
+    certify: bool = True,
+    paths: tuple[int, ...] = (),
+    horizon: float | None = None,
+    practical_ts: float | None = None,
+    simulation: Mapping[str, Any] | None = None,
+    progress: bool = False,
+) -> PipelineResult:
+    """Train -> certify -> simulate -> validate, with one seed and one set of demonstrations.
+
+    Parameters
+    ----------
+    spec
+        The loaded specification.
+    seed
+        The one seed of the run: demonstrations, training and simulation (default: the spec's
+        ``[tasil] seed``). When the spec brings its own policy, the demonstrations for the
+        certificate come from the spec's ``[tasil] seed`` (the data that policy was trained on)
+        and ``seed`` seeds the simulation only.
+    train
+        ``None``: train when the spec has no learned policy; ``True``: always (the trained policy
+        replaces the spec's); ``False``: never.
+    methods
+        Training methods (``"tasil"``, ``"bc"``) trained on the same demonstrations; the first is
+        the policy certified and simulated (default: the spec's ``[tasil] method``).
+    tasil
+        Overrides of ``[tasil]`` settings for this run (e.g. ``steps``, ``trajectories``).
+    certify
+        Compute the certificate (needed for validation).
+    paths
+        One validation run per entry, with that many simulated paths.
+    horizon, practical_ts
+        Passed to :func:`~drip_cert.validate.validate`.
+    simulation
+        Overrides of ``[simulation]`` settings for this run (e.g. ``dt``, ``Ts``).
+    progress
+        Stages, training steps and simulation progress on stderr.
+    """
+    from drip_cert.learn.imitation import demonstration_set, train_on_system
+
+    stage = Stages("pipeline", enabled=progress)
+    st = spec.settings.tasil
+    seed = st.seed if seed is None else int(seed)
+    st = dataclasses.replace(st, seed=seed, **dict(tasil or {}))
+    s = spec.system
+    do_train = s.learned is None if train is None else train
+    if not do_train and s.learned is None and (certify or paths):
+        raise SpecError(
+            "the spec has no learned policy: add [policy] learned, or let the pipeline train one",
+            field="policy.learned",
+        )
+    methods = methods or (st.method,)
+    timings: dict[str, float] = {}
+    notes: list[str] = []
+    trained: dict[str, TrainedPolicy] = {}
+    gaps: dict[str, np.ndarray] = {}
+    demos = None
+    if do_train:
+        stage(f"demonstrations ({st.trajectories} + {st.heldout} held-out, seed {seed})")
+        demos = demonstration_set(s, st)
+        for method in methods:
+            stage(f"training {method} ({st.steps} steps)")
+            t0 = time.perf_counter()
+            trained[method] = train_on_system(
+                s, st, method=method, progress=progress, demonstrations=demos
+            )
+            timings[f"train_{method}_s"] = time.perf_counter() - t0
+            if demos.heldout is not None:
+                gaps[method] = _heldout_gap(s, trained[method], st.samples)
+        s = trained[methods[0]].system
+        spec = spec.with_system(s)
+        notes.append(
+            f"trained {methods[0]} ({st.steps} steps, {st.trajectories} trajectories, seed {seed})"
+        )
+    cert = None
+    if certify or paths:
+        from drip_cert.bounds.certificate import certify as _certify
+
+        stage("certificate")
+        t0 = time.perf_counter()
+        cert = _certify(spec, demonstrations=demos, progress=progress)
+        timings["certify_s"] = time.perf_counter() - t0
+    reports = []
+    if paths:
+        from drip_cert.validate import validate
+
+        sim = dataclasses.replace(spec.settings.simulation, **dict(simulation or {}))
+        for n in paths:
+            stage(f"simulation and validation ({n} paths)")
+            t0 = time.perf_counter()
+            reports.append(
+                validate(
+                    s,
+                    cert,
+                    sim,
+                    paths=n,
+                    seed=seed,
+                    practical_ts=practical_ts,
+                    horizon=horizon,
+                    progress=progress,
+                )
+            )
+            timings[f"validate_{n}_s"] = time.perf_counter() - t0
+    stage.done()
+    return PipelineResult(
+        spec=spec,
+        seed=seed,
+        demonstrations=demos,
+        trained=trained,
+        heldout_gaps=gaps,
+        certificate=cert,
+        validations=tuple(reports),
+        timings=timings,
+        notes=tuple(notes),
+    )
+
+
+def _heldout_gap(s: Any, tp: TrainedPolicy, samples: int) -> np.ndarray:
+    """Max over the horizon of ``||x'_t - x*_t||`` from each held-out initial state."""
+    from drip_cert.learn.imitation import nominal_field
+    from drip_cert.learn.tasil import evaluate_gap
+
+    assert tp.heldout is not None  # called only when held-out demonstrations exist
+    return np.asarray(
+        evaluate_gap(
+            nominal_field(s),
+            s.numeric.expert,
+            tp.mlp.apply_jax,
+            tp.heldout.x0,
+            s.horizon,
+            samples,
+        )
+    )
+
+
+# ---------------------------------------------------------------------------- commands
 def train_from_spec(
     spec_path: str | Path,
     *,
@@ -52,34 +240,29 @@ def train_from_spec(
 
     Files: ``policy.npz``/``policy.json`` (the MLP), ``demonstrations.npz`` (training data),
     ``train.json`` (settings, losses, timings, held-out gaps). Every file is written atomically.
+    ``use_in_spec`` in ``train.json`` is the TOML that makes a spec certify this policy on these
+    demonstrations (the ``[tasil]`` seed and sizes included).
     """
     from drip_cert.learn.data import save_demonstrations
-    from drip_cert.learn.imitation import nominal_field, train_on_system
-    from drip_cert.learn.tasil import evaluate_gap
-    from drip_cert.numerics.atomic_io import atomic_write_json
     from drip_cert.spec import load_spec
 
     spec = load_spec(spec_path)
-    st = spec.settings.tasil
-    st = dataclasses.replace(
-        st, method=method, trajectories=trajectories, seed=seed, steps=steps or st.steps
+    over: dict[str, Any] = {"trajectories": trajectories, "method": method}
+    if steps:
+        over["steps"] = steps
+    run = run_pipeline(
+        spec,
+        seed=seed,
+        train=True,
+        methods=(method,),
+        tasil=over,
+        certify=False,
+        progress=progress,
     )
-    t0 = time.perf_counter()
-    tp = train_on_system(spec.system, st, progress=progress)
-    wall = time.perf_counter() - t0
+    tp = run.trained[method]
+    st = tp.settings
     s = spec.system
-    gaps = (
-        evaluate_gap(
-            nominal_field(s),
-            s.numeric.expert,
-            tp.mlp.apply_jax,
-            tp.heldout.x0,
-            s.horizon,
-            st.samples,
-        )
-        if tp.heldout is not None
-        else np.array([])
-    )
+    gaps = run.heldout_gaps.get(method, np.array([]))
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     tp.mlp.save(out / "policy.npz")
@@ -90,7 +273,7 @@ def train_from_spec(
         "trajectories": trajectories,
         "seed": seed,
         "steps": st.steps,
-        "wall_s": wall,
+        "wall_s": run.timings[f"train_{method}_s"],
         "best_step": tp.result.best_step,
         "best_val_loss": tp.result.best_val_loss,
         "stop_reason": tp.result.stop_reason,
@@ -101,11 +284,50 @@ def train_from_spec(
             '[blocks.pi_il]\nkind = "mlp"\nweights = "policy.npz"\n'
             f"inputs = {s.n}\noutputs = {s.m}\n\n[policy]\nlearned = ["
             + ", ".join(f'"pi_il(x)[{j}]"' for j in range(s.m))
-            + "]"
+            + "]\n\n[tasil]  # the demonstrations this policy was trained on\n"
+            f'method = "{method}"\nseed = {seed}\ntrajectories = {trajectories}\n'
+            f"samples = {st.samples}\nheldout = {st.heldout}"
         ),
     }
     atomic_write_json(out / "train.json", summary)
     return summary
+
+
+def validate_spec(
+    spec_path: str | Path,
+    *,
+    trajectories: int = 1000,
+    seed: int | None = None,
+    out: str | Path | None = None,
+    practical_ts: float | None = None,
+    quick: bool = False,
+    progress: bool = False,
+) -> ValidationReport:
+    """``drip-cert validate``: certify the spec's system and validate it by simulation.
+
+    A spec without a learned policy gets one trained with its ``[tasil]`` settings (the same
+    demonstrations then feed the certificate). ``trajectories`` is the number of simulated
+    paths; ``out`` receives ``validation.json`` and the simulation (atomically).
+    """
+    from drip_cert.spec import load_spec
+
+    spec = load_spec(spec_path)
+    tasil = {"steps": min(spec.settings.tasil.steps, 300)} if quick else None
+    run = run_pipeline(
+        spec,
+        seed=seed,
+        tasil=tasil,
+        paths=(min(trajectories, 200) if quick else trajectories,),
+        horizon=min(spec.system.horizon, 2.0) if quick else None,
+        practical_ts=practical_ts,
+        progress=progress,
+    )
+    rep = run.validations[0].with_notes_before(run.notes)
+    if out is not None:
+        out = Path(out)
+        rep.result.save(out / "simulation")
+        atomic_write_json(out / "validation.json", rep.to_dict())
+    return rep
 
 
 @dataclasses.dataclass(frozen=True)
@@ -131,95 +353,75 @@ def reproduce(
     name: str, *, out: str | Path, quick: bool = False, seed: int = 0, progress: bool = True
 ) -> dict[str, Any]:
     """``drip-cert reproduce paper-4d``; see the module docstring."""
-    from drip_cert.bounds.certificate import certify
-    from drip_cert.learn.imitation import nominal_field, train_on_system
-    from drip_cert.learn.tasil import evaluate_gap
-    from drip_cert.numerics.atomic_io import atomic_write_json, atomic_write_text
-    from drip_cert.report import (
-        certificate_markdown,
-        reproduce_figure,
-        reproduce_markdown,
-    )
+    from drip_cert.report import certificate_markdown, reproduce_figure, reproduce_markdown
     from drip_cert.spec import load_spec
-    from drip_cert.validate import validate
 
     t_start = time.perf_counter()
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     rs = ReproduceSettings.make(quick)
-    spec = load_spec(_spec_path_packaged(name))
-    base = spec.system
-    st = dataclasses.replace(spec.settings.tasil, steps=rs.steps, seed=seed)
-    timings: dict[str, float] = {}
-    trained = {}
-    for method in ("tasil", "bc"):
-        t0 = time.perf_counter()
-        trained[method] = train_on_system(base, st, method=method, progress=progress)
-        timings[f"train_{method}_s"] = time.perf_counter() - t0
-    tp = trained["tasil"]
-    s = tp.system
-    tp.mlp.save(out / "policy_tasil.npz")
-    trained["bc"].mlp.save(out / "policy_bc.npz")
-    heldout_gaps = {}
-    for method, t in trained.items():
-        g = evaluate_gap(
-            nominal_field(base),
-            base.numeric.expert,
-            t.mlp.apply_jax,
-            tp.heldout.x0,
-            base.horizon,
-            st.samples,
-        )
-        heldout_gaps[method] = {"mean": float(np.mean(g)), "max": float(np.max(g))}
-    t0 = time.perf_counter()
-    cert = certify(spec.with_system(s))
-    timings["certify_s"] = time.perf_counter() - t0
+    spec = load_spec(bundled_spec(name))
+    sim = spec.settings.simulation
+    run = run_pipeline(
+        spec,
+        seed=seed,
+        train=True,
+        methods=("tasil", "bc"),
+        tasil={"steps": rs.steps},
+        paths=(rs.paths_paper, rs.paths_ours),
+        horizon=rs.horizon,
+        simulation={"dt": rs.dt, "Ts": max(sim.Ts, 5 * rs.dt)},
+        progress=progress,
+    )
+    cert = run.certificate
+    assert cert is not None  # certify=True
+    timings = dict(run.timings)
+    timings["simulate_paper_s"] = timings.pop(f"validate_{rs.paths_paper}_s", math.nan)
+    timings["simulate_ours_s"] = timings.pop(f"validate_{rs.paths_ours}_s", math.nan)
+    run.trained["tasil"].mlp.save(out / "policy_tasil.npz")
+    run.trained["bc"].mlp.save(out / "policy_bc.npz")
+    heldout_gaps = {
+        m: {"mean": float(np.mean(g)), "max": float(np.max(g))} for m, g in run.heldout_gaps.items()
+    }
     atomic_write_json(out / "certificate.json", cert.to_dict())
     atomic_write_text(out / "certificate.md", certificate_markdown(cert))
-    sim = spec.settings.simulation
-    sim = dataclasses.replace(sim, dt=rs.dt, Ts=max(sim.Ts, 5 * rs.dt))
-    runs = {}
-    for label, paths in (("paper", rs.paths_paper), ("ours", rs.paths_ours)):
-        t0 = time.perf_counter()
-        rep = validate(s, cert, sim, paths=paths, seed=seed, horizon=rs.horizon, progress=progress)
-        timings[f"simulate_{label}_s"] = time.perf_counter() - t0
-        runs[label] = rep
-    res = runs["ours"]["_result"]
+    paper, ours = run.validations
+    runs = {"paper": paper, "ours": ours}
+    res = ours.result
     res.save(out / "simulation")
     claims = qualitative_claims(res)
     fig_paths = reproduce_figure(
-        res,
-        runs["paper"]["_result"],
-        cert,
-        out,
-        at_certified=runs["ours"]["at_certified_parameters"],
+        res, paper.result, cert, out, at_certified=ours.at_certified_parameters
     )
-    summary_obj = {
+    validation = {}
+    for k, v in runs.items():
+        d = v.to_dict()
+        d.pop("certificate")
+        validation[k] = d
+    summary_obj: dict[str, Any] = {
         "experiment": name,
         "quick": quick,
+        "seed": seed,
         "settings": dataclasses.asdict(rs),
         "heldout_gaps": heldout_gaps,
         "tasil_better_than_bc": heldout_gaps["tasil"]["mean"] < heldout_gaps["bc"]["mean"],
         "claims": claims,
-        "validation": {
-            k: {kk: vv for kk, vv in v.items() if kk not in ("_result", "certificate")}
-            for k, v in runs.items()
-        },
+        "validation": validation,
         "timings": timings,
         "figures": [str(p) for p in fig_paths],
     }
     summary_obj["certificate_verdict"] = cert.verdict.value
-    summary_obj["validation_status"] = {k: v["status"] for k, v in runs.items()}
+    summary_obj["validation_status"] = {k: v.status for k, v in runs.items()}
     # exit 0 only when the paper's claims reproduce, the certificate is certified and its
     # validation compared a finite bound without a violation
     summary_obj["holds"] = (
         all(c["holds"] for c in claims)
         and cert.certified
-        and all(r["status"] == "holds" for r in runs.values())
+        and all(r.status == "holds" for r in runs.values())
     )
     timings["total_s"] = time.perf_counter() - t_start
     atomic_write_json(out / "reproduce.json", summary_obj)
-    atomic_write_text(out / "report.md", reproduce_markdown(summary_obj, cert, runs))
+    atomic_write_text(out / "report.md", reproduce_markdown(summary_obj, cert, validation))
     lines = [f"paper-4d reproduced in {timings['total_s']:.0f} s -> {out}/report.md"]
     for c in claims:
         lines.append(
@@ -231,17 +433,11 @@ def reproduce(
         f"{heldout_gaps['bc']['mean']:.4g}"
     )
     lines.append(
-        f"  certificate: {cert.verdict.value}; validation: {runs['ours']['status']}"
-        + ("" if runs["ours"]["at_certified_parameters"] else " (not at certified parameters)")
+        f"  certificate: {cert.verdict.value}; validation: {ours.status}"
+        + ("" if ours.at_certified_parameters else " (not at certified parameters)")
     )
     summary_obj["summary"] = "\n".join(lines)
-    return json.loads(json.dumps(_strip(summary_obj), default=str))
-
-
-def _strip(obj: Any) -> Any:
-    from drip_cert.numerics.atomic_io import jsonable
-
-    return jsonable(obj)
+    return json.loads(json.dumps(jsonable(summary_obj), default=str))
 
 
 def qualitative_claims(res: Any) -> list[dict[str, Any]]:

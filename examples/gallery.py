@@ -13,7 +13,6 @@ practical parameters; the figure shows the total imitation gap of each case and 
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import sys
 from pathlib import Path
 
@@ -22,33 +21,32 @@ EXAMPLES = ("unmatched_2d", "nonlinear_2d", "infeasible_2d")
 
 
 def run_one(name: str, out: Path, quick: bool = False, seed: int = 0) -> dict:
-    """Certify, train, simulate and draw one example; returns a small summary."""
-    from drip_cert.bounds.certificate import certify
-    from drip_cert.learn.imitation import tasil_settings, train_on_system
+    """Train, certify, simulate and draw one example (one pipeline run); a small summary."""
     from drip_cert.numerics.atomic_io import atomic_write_text
     from drip_cert.report import certificate_markdown, reproduce_figure
     from drip_cert.spec import load_spec
-    from drip_cert.spec.load import Spec
-    from drip_cert.validate import SimSettings, validate
+    from drip_cert.workflows import run_pipeline
 
     spec = load_spec(ROOT / "examples" / name / f"{name}.toml")
-    st = tasil_settings(spec.table("tasil"))
-    st = dataclasses.replace(st, steps=200 if quick else 1500, seed=seed)
-    tp = train_on_system(spec.system, st)
-    spec2 = Spec(spec.path, tp.system, spec.tables)
-    cert = certify(spec2)
+    horizon = 2.0 if quick else spec.system.horizon
+    run = run_pipeline(
+        spec,
+        seed=seed,
+        train=True,
+        tasil={"steps": 200 if quick else 1500},
+        paths=(200 if quick else 5000, 100),
+        horizon=horizon,
+    )
+    cert = run.certificate
+    big, small = run.validations
     out.mkdir(parents=True, exist_ok=True)
     atomic_write_text(out / f"{name}.md", certificate_markdown(cert))
-    sim = SimSettings.from_table(spec.table("simulation"))
-    horizon = 2.0 if quick else spec.system.horizon
-    big = validate(tp.system, cert, sim, paths=200 if quick else 5000, seed=seed, horizon=horizon)
-    small = validate(tp.system, cert, sim, paths=100, seed=seed, horizon=horizon)
     figs = reproduce_figure(
-        big["_result"],
-        small["_result"],
+        big.result,
+        small.result,
         cert,
         out,
-        at_certified=big["at_certified_parameters"],
+        at_certified=big.at_certified_parameters,
         name=name,
     )
     for f in figs:
@@ -60,8 +58,8 @@ def run_one(name: str, out: Path, quick: bool = False, seed: int = 0) -> dict:
         "parts": {k: v["verdict"] for k, v in cert.part_verdicts().items()},
         "certified": cert.certified,
         "failing": failing,
-        "validation_status": big["status"],
-        "validation_holds": big["holds"],
+        "validation_status": big.status,
+        "validation_holds": big.holds,
         "figure": str(out / f"{name}.png"),
     }
 

@@ -1,7 +1,7 @@
 """drip-cert's own implementation against the independent re-derivations of this package.
 
 Each check imports a drip-cert module (``drip_cert.analysis.iss``, ``drip_cert.bounds.tasil``,
-``drip_cert.bounds.l1drac``, ``drip_cert.bounds.l1drac_appendix``) and compares it with the
+``drip_cert.bounds.l1drac.appendix``, ``.sides``, ``.radii``) and compares it with the
 formulas re-derived here (two computations of the same number), plus the properties the
 certificate relies on: the tighter delta-ISS bound is never looser than the paper's, the
 Upsilon maps are non-decreasing (Prop. A.1), the Markov radius is valid. A module that cannot be
@@ -115,7 +115,7 @@ def check_impl_tasil(ctx: Context) -> CheckResult:
 
 def _random_l1_constants(rng: np.random.Generator):
     """A random valid ``L1Constants`` (Assumption 7 satisfied) and the matching symbol values."""
-    from drip_cert.bounds.l1drac import L1Constants
+    from drip_cert.bounds.l1drac.constants import L1Constants
 
     vals: dict[str, object] = {}
     for fld in dataclasses.fields(L1Constants):
@@ -142,11 +142,14 @@ _MAP = {
 }
 
 
-@register("impl.l1drac_maps", "drip_cert.bounds.l1drac_appendix vs (A.13)-(A.19), (25); Prop. A.1")
+@register(
+    "impl.l1drac_maps", "drip_cert.bounds.l1drac.appendix, .sides vs (A.13)-(A.19), (25); Prop. A.1"
+)
 def check_impl_l1drac_maps(ctx: Context) -> CheckResult:
     """drip-cert's Upsilon maps equal this package's transcription and are non-decreasing."""
     name = "impl.l1drac_maps"
-    from drip_cert.bounds import l1drac_appendix as ap
+    from drip_cert.bounds.l1drac import appendix as ap
+    from drip_cert.bounds.l1drac import sides
 
     maps = ts_maps()
     syms = [SYM[k] for k in SYM]
@@ -161,7 +164,7 @@ def check_impl_l1drac_maps(ctx: Context) -> CheckResult:
         "Utilde_minus": ap.upsilon_minus_tilde,
         "U_minus": ap.upsilon_minus,
     }
-    theirs_a = {"Ua1": ap.upsilon_a1, "Ua2": ap.upsilon_a2, "Ua3": ap.upsilon_a3}
+    theirs_a = {"Ua1": sides.upsilon_a1, "Ua2": sides.upsilon_a2, "Ua3": sides.upsilon_a3}
     rng = ctx.rng
     worst_eq = 0.0
     worst_mono = -np.inf
@@ -200,7 +203,7 @@ def check_impl_l1drac_maps(ctx: Context) -> CheckResult:
     ok = worst_eq <= MAP_REL_TOL and worst_mono <= MONO_REL_TOL
     return result(
         name,
-        "drip_cert.bounds.l1drac_appendix vs (A.13)-(A.19), (25); Prop. A.1",
+        "drip_cert.bounds.l1drac.appendix, .sides vs (A.13)-(A.19), (25); Prop. A.1",
         holds=bool(ok),
         residual=max(worst_eq, worst_mono),
         detail=(
@@ -210,11 +213,11 @@ def check_impl_l1drac_maps(ctx: Context) -> CheckResult:
     )
 
 
-@register("impl.l1drac_markov", "drip_cert.bounds.l1drac p_for_delta / kappa_markov")
+@register("impl.l1drac_markov", "drip_cert.bounds.l1drac.radii p_for_delta / kappa_markov")
 def check_impl_markov(ctx: Context) -> CheckResult:
     """kappa <= e rho and (rho/kappa)^{2p} = delta for drip-cert's integer p, any delta."""
     name = "impl.l1drac_markov"
-    from drip_cert.bounds.l1drac import kappa_markov, p_for_delta
+    from drip_cert.bounds.l1drac.radii import kappa_markov, p_for_delta
 
     rng = ctx.rng
     deltas = np.concatenate(
@@ -229,7 +232,7 @@ def check_impl_markov(ctx: Context) -> CheckResult:
         worst = max(worst, (k - math.e) / math.e, abs(k ** (-2 * p) - d) / d - KAPPA_REL_TOL)
     return result(
         name,
-        "drip_cert.bounds.l1drac p_for_delta / kappa_markov",
+        "drip_cert.bounds.l1drac.radii p_for_delta / kappa_markov",
         holds=bool(worst <= KAPPA_REL_TOL),
         residual=worst,
         detail=f"{deltas.size} deltas: max of (kappa - e rho)/(e rho) and tail error {worst:.1e}",

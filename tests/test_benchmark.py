@@ -10,7 +10,8 @@ import numpy as np
 
 from drip_cert._jax import jax, jnp
 from drip_cert.control.l1drac import L1Params
-from drip_cert.sim.engine import SimConfig, build_chunk_fn
+from drip_cert.sim.config import SimConfig
+from drip_cert.sim.kernel import build_chunk_fn
 from drip_cert.sim.noise import normals
 
 _PATH = Path(__file__).resolve().parents[1] / "benchmarks" / "mc_throughput.py"

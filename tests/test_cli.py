@@ -8,7 +8,7 @@ import pytest
 
 from drip_cert.cli import main
 
-PAPER = "examples/paper_4d/paper_4d.toml"
+PAPER = "drip_cert/data/paper_4d/paper_4d.toml"
 EXACT_TOL = 1e-12  # closed-form rates/gains of linear closed loops: rounding only
 SOUND_ROUNDING_TOL = 1e-9  # sound interval bounds are rounded outward by a few ulps per operation
 

@@ -1,4 +1,4 @@
-"""Tests of the Monte-Carlo engine (drip_cert.sim.engine)."""
+"""Tests of the Monte-Carlo engine (drip_cert.sim: config, kernel, driver, resume, result)."""
 
 from __future__ import annotations
 
@@ -15,13 +15,10 @@ from drip_cert.control.l1drac import L1Params
 from drip_cert.errors import SpecError
 from drip_cert.model.mlp import init_mlp
 from drip_cert.model.numeric import make_model
-from drip_cert.sim.engine import (
-    STATUS_CAP,
-    STATUS_NONFINITE,
-    SimConfig,
-    build_chunk_fn,
-    simulate,
-)
+from drip_cert.sim import kernel
+from drip_cert.sim.config import STATUS_CAP, STATUS_NONFINITE, SimConfig
+from drip_cert.sim.engine import simulate
+from drip_cert.sim.kernel import build_chunk_fn
 
 Z_CLT = 4.5
 """CLT tolerance in standard errors: a correct sampler fails a check with probability ~7e-6
@@ -223,6 +220,31 @@ def test_worker_count_invariance_bit_for_bit(base_result, model, chunk_size, wor
     _assert_bitwise(base_result, res)
 
 
+def test_split_into_calls_and_progress_bar_change_no_bit(base_result, model, monkeypatch, capsys):
+    """One recorded time per kernel call (the finest split), with the bar on: the same bits."""
+    monkeypatch.setattr(kernel, "MIN_CALL_PATH_STEPS", 1)
+    cfg = dataclasses.replace(_CFG, chunk_size=90)
+    res = simulate(model, cfg, _x0, _x0_bar, progress=True, workers=1)
+    _assert_bitwise(base_result, res)
+    assert "path-step" in capsys.readouterr().err  # the bar is on stderr
+
+
+def test_kernel_reports_each_call(model, monkeypatch):
+    """``on_block`` hears of every call once, in order, and the calls cover the records."""
+    idx = jnp.arange(16, dtype=jnp.uint32)
+    monkeypatch.setattr(kernel, "MIN_CALL_PATH_STEPS", 1 << 40)  # all records in one call
+    recs, codes1 = build_chunk_fn(model, _CFG, _x0, _x0_bar)(idx)
+    # a record block is 10 steps of 16 paths in 4 scenarios: two of them per call
+    monkeypatch.setattr(kernel, "MIN_CALL_PATH_STEPS", 2 * 10 * 16 * 4)
+    compiled = build_chunk_fn(model, _CFG, _x0, _x0_bar).compile(16)
+    assert (compiled.records_per_call, compiled.n_calls) == (2, 5)
+    heard = []
+    blocks, codes = compiled(idx, heard.append)
+    assert heard == [2] * 5
+    assert np.array_equal(np.concatenate(blocks), np.asarray(recs))
+    assert np.array_equal(np.asarray(codes), np.asarray(codes1))
+
+
 def test_workers_must_be_positive(model):
     with pytest.raises(SpecError, match="workers"):
         simulate(model, _CFG, _x0, _x0_bar, progress=False, workers=0)
@@ -411,3 +433,31 @@ def test_theta_ad_default_equals_first_rows_of_gbar_inverse():
     direct = np.linalg.inv(np.hstack([g, g_perp]))[:2]
     via_pinv = np.asarray(theta_ad_from_g(lambda t: jnp.asarray(g))(0.0))
     np.testing.assert_allclose(via_pinv, direct, rtol=0, atol=THETA_ATOL)
+
+
+JAC_RTOL = 1e-12
+"""The symbolic Jacobian lowered to jax and forward-mode autodiff of the lowered closed loop are
+two float64 evaluations of one expression: they agree to a few ulps of its O(1) entries."""
+
+
+def test_system_numeric_is_the_one_cached_view_with_exact_jacobians():
+    """``System.numeric`` is built once and is what the engine and the analysis both read."""
+    from drip_cert.model.numeric import SimModel, closed_loop_jacobian
+    from drip_cert.spec import load_spec
+
+    s = load_spec("examples/nonlinear_2d/nonlinear_2d.toml").system
+    x1, x2 = s.states
+    s = s.with_learned([-0.45 * x2 + 0.05 * x1])
+    num = s.numeric
+    assert isinstance(num, SimModel) and s.numeric is num
+    assert (num.n, num.m, num.d, num.name) == (2, 1, 2, s.name)
+    x = jnp.array([0.3, -0.7])
+    for jac, pol in ((num.jac_expert, num.expert), (num.jac_learned, num.learned)):
+        auto = closed_loop_jacobian(num.f, num.g, pol)(0.5, x)
+        np.testing.assert_allclose(np.asarray(jac(0.5, x)), np.asarray(auto), rtol=JAC_RTOL)
+    # a view from plain functions gets the autodiff Jacobians; none without a learned policy
+    plain = make_model(2, 1, 1, f=num.f, g=num.g, expert=num.expert)
+    assert plain.jac_learned is None
+    np.testing.assert_allclose(
+        np.asarray(plain.jac_expert(0.5, x)), np.asarray(num.jac_expert(0.5, x)), rtol=JAC_RTOL
+    )

@@ -18,12 +18,16 @@ from scipy.optimize import minimize_scalar
 
 from drip_cert.analysis.growth import (
     BNB_RTOL,
-    _spectral_upper,
     growth_bound,
     holder_half_bound,
     lipschitz_bound,
 )
 from drip_cert.model.expr import parse_expression
+from drip_cert.numerics.sampling import (
+    SAMPLE_RADII,
+    growth_ratio_estimate,
+    holder_estimate,
+)
 from drip_cert.provenance import How
 
 #: a sound bound may exceed the supremum by the branch-and-bound stopping rule (relative
@@ -47,7 +51,7 @@ def _parse(text: str) -> sp.Expr:
     return parse_expression(text, field="test", scalars=SCALARS, vector_name="x", vector=X)
 
 
-# the DRIP paper's example (examples/paper_4d/spec.toml, [uncertainty])
+# the DRIP paper's example (drip_cert/data/paper_4d/paper_4d.toml, [uncertainty])
 LAMBDA_MU = sp.Matrix([_parse("0.1 + 0.05*norm(x)")] * 4)
 LAMBDA_SIGMA = sp.diag(*[_parse("0.1 + 0.05*norm(x)**0.5")] * 4)
 
@@ -230,9 +234,38 @@ def test_bounds_never_below_sampled_ratios(c0, c1, c2, kind, seed):
     assert D.how is not How.ESTIMATE  # every field here is radial, bounded or constant
 
 
-def test_spectral_upper_is_an_upper_bound():
-    rng = np.random.default_rng(3)
-    for _ in range(20):
-        M = np.abs(rng.normal(size=(rng.integers(1, 8), rng.integers(1, 6))))
-        s = float(np.linalg.norm(M, 2))
-        assert s * (1 - SAMPLE_SLACK) <= _spectral_upper(M) <= s * (1 + 1e-6)
+# ------------------------------------------------------------- the sampled estimators
+def _linear(tt, X):
+    return 2.0 * X  # ||F(a)|| = 2 ||a||: growth sup 2 (as ||a|| -> inf), Lipschitz 2
+
+
+def test_sampled_estimates_of_a_linear_field_approach_the_constants_from_below():
+    g = growth_ratio_estimate(_linear, 3, 1.0, [0.0])
+    # 2 r / sqrt(1 + r^2) at the largest radius r = 1e6 is 2 (1 - 5e-13)
+    assert 2.0 * (1 - 1e-12) <= g.value <= 2.0
+    assert np.linalg.norm(g.argmax) == pytest.approx(SAMPLE_RADII[-1])
+    assert not g.likely_infinite and g.n_nonfinite == 0 and g.diagnostics() == ""
+    L = holder_estimate(_linear, 3, 1.0, [0.0])
+    assert 2.0 * (1 - 1e-6) <= L.value <= 2.0 * (1 + 1e-6)  # cancellation at distance 1e-6
+    assert not L.likely_infinite and "Lipschitz ratio" in L.diagnostics()
+
+
+def test_sampled_estimates_flag_infinite_constants_and_undefined_points():
+    def sqrt_norm(tt, X):
+        r = np.linalg.norm(X, axis=1, keepdims=True)
+        return np.sqrt(r)  # 1/2-Hoelder, not Lipschitz at 0
+
+    L = holder_estimate(sqrt_norm, 2, 1.0, [0.0])
+    assert L.likely_infinite and "likely infinite" in L.diagnostics()
+    H = holder_estimate(sqrt_norm, 2, 0.5, [0.0])
+    assert not H.likely_infinite and H.value <= 1.0 + SAMPLE_SLACK
+
+    def cubic_with_hole(tt, X):
+        out = X**3
+        out[np.linalg.norm(X, axis=1) == 0.0] = np.nan  # undefined at the origin
+        return out
+
+    g = growth_ratio_estimate(cubic_with_hole, 2, 1.0, [0.0, 1.0])
+    assert g.likely_infinite and g.n_nonfinite == 1
+    assert "not finite (undefined) at 1 of" in g.diagnostics()
+    assert math.isfinite(g.value) and g.value > 1e11

@@ -16,9 +16,10 @@ import mpmath
 import numpy as np
 import pytest
 
-from drip_cert.bounds import l1drac_appendix as A
-from drip_cert.bounds.l1drac import CONSTANT_NAMES, L1Constants
-from drip_cert.bounds.l1drac_toml import design_l1_report, load_l1_constants
+from drip_cert.bounds.l1drac import appendix as A
+from drip_cert.bounds.l1drac import sides as S
+from drip_cert.bounds.l1drac.constants import CONSTANT_NAMES, L1Constants
+from drip_cert.bounds.l1drac.toml import design_l1_report, load_l1_constants
 from drip_cert.errors import AssumptionViolation, SpecError
 
 EXAMPLE = Path(__file__).resolve().parents[1] / "examples/l1drac_constants/double_integrator.toml"
@@ -169,7 +170,7 @@ def test_gamma_r_double_integrator_by_hand() -> None:
         for rho in (0.5, 2.0, 7.0):
             r = rho + 5.0
             by_hand = 0.05 + 0.15 * w + (0.1 + 0.3 * w) * math.sqrt(r) + (0.05 + 0.15 * w) * r
-            assert A.gamma_r(rho, omega, rc) == pytest.approx(by_hand, rel=REL_CLOSED_FORM)
+            assert S.gamma_r(rho, omega, rc) == pytest.approx(by_hand, rel=REL_CLOSED_FORM)
 
 
 def test_odot4_uses_hat_delta_5() -> None:
@@ -302,11 +303,11 @@ def test_remark_3_1_gamma_r_orders() -> None:
     rc = A.reference_constants(c, 3)
     lim = rc.otimes_1 / (2 * math.sqrt(c.lam))
     assert lim > 0
-    ratios = [A.gamma_r(r, 1e3, rc) / r**1.5 for r in (1e4, 1e8, 1e12)]
+    ratios = [S.gamma_r(r, 1e3, rc) / r**1.5 for r in (1e4, 1e8, 1e12)]
     assert abs(ratios[-1] / lim - 1) < 1e-4
     assert abs(ratios[0] - lim) > abs(ratios[1] - lim) > abs(ratios[2] - lim)
     # O(1) in omega: bounded and convergent
-    g = [A.gamma_r(2.0, w, rc) for w in (1e4, 1e8, 1e12)]
+    g = [S.gamma_r(2.0, w, rc) for w in (1e4, 1e8, 1e12)]
     r = 2.0 + rc.Delta_star  # (18b) at rho_r = 2 with omega / |2 lambda - omega| = 1:
     g_inf = (
         rc.circ_1 / (2 * c.lam)
@@ -333,16 +334,16 @@ def test_remark_3_2_bandwidth_orders() -> None:
     c = di_constants()
     ws = np.logspace(8, 12, 5)
     rc, tc = A.reference_constants(c, 2), A.true_constants(c, 2)
-    th_r = [A.theta_r(2.0, w, rc) / abs(2 * c.lam - w) for w in ws]
-    th_a = [A.theta_a(1.0, 2.0, w, tc, c.Delta_star) / abs(2 * c.lam - w) for w in ws]
+    th_r = [S.theta_r(2.0, w, rc) / abs(2 * c.lam - w) for w in ws]
+    th_a = [S.theta_a(1.0, 2.0, w, tc, c.Delta_star) / abs(2 * c.lam - w) for w in ws]
     assert _slope(ws, th_r) == pytest.approx(-0.5, abs=SLOPE_TOL)
     assert _slope(ws, th_a) == pytest.approx(-0.5, abs=SLOPE_TOL)
     nodiff = dataclasses.replace(
         c, Delta_sigma=0.0, Delta_sigma_par=0.0, L_sigma=0.0, L_sigma_par=0.0
     )
     rc0, tc0 = A.reference_constants(nodiff, 2), A.true_constants(nodiff, 2)
-    th_r0 = [A.theta_r(2.0, w, rc0) / abs(2 * c.lam - w) for w in ws]
-    th_a0 = [A.theta_a(1.0, 2.0, w, tc0, c.Delta_star) / abs(2 * c.lam - w) for w in ws]
+    th_r0 = [S.theta_r(2.0, w, rc0) / abs(2 * c.lam - w) for w in ws]
+    th_a0 = [S.theta_a(1.0, 2.0, w, tc0, c.Delta_star) / abs(2 * c.lam - w) for w in ws]
     assert _slope(ws, th_r0) == pytest.approx(-1.0, abs=SLOPE_TOL)
     assert _slope(ws, th_a0) == pytest.approx(-1.0, abs=SLOPE_TOL)
 
@@ -353,7 +354,7 @@ def test_remark_3_2_bandwidth_orders() -> None:
 def _upsilon_slope(c: L1Constants) -> float:
     Ts = np.logspace(-16, -12, 9)
     v = [
-        A.upsilon_sum(1.0 + 2.0 + c.Delta_star, 1.0, A.sampling_constants(c, 1, 1e3, T, 100.0))
+        S.upsilon_sum(1.0 + 2.0 + c.Delta_star, 1.0, A.sampling_constants(c, 1, 1e3, T, 100.0))
         for T in Ts
     ]
     return _slope(Ts, v)

@@ -15,10 +15,14 @@ import numpy as np
 import pytest
 from scipy.optimize import brentq
 
-from drip_cert.bounds import l1drac as L
-from drip_cert.bounds import l1drac_appendix as A
-from drip_cert.bounds.l1drac import DesignRequest, design
-from drip_cert.bounds.l1drac_toml import load_l1_constants
+from drip_cert.bounds.l1drac import appendix as A
+from drip_cert.bounds.l1drac import conditions as C
+from drip_cert.bounds.l1drac import radii, searches
+from drip_cert.bounds.l1drac import sides as S
+from drip_cert.bounds.l1drac.constants import L1Constants
+from drip_cert.bounds.l1drac.designer import design, tradeoff_table
+from drip_cert.bounds.l1drac.request import DesignRequest
+from drip_cert.bounds.l1drac.toml import load_l1_constants
 from drip_cert.errors import SpecError
 
 EXAMPLE = Path(__file__).resolve().parents[1] / "examples/l1drac_constants/double_integrator.toml"
@@ -28,7 +32,7 @@ REL_CLOSED_FORM = 1e-13
 #: two independent root finders (ours: bisection to ROOT_RTOL; scipy brentq to xtol 1e-14)
 REL_TWO_ROOTS = 1e-10
 #: a point this much below a returned minimal root must fail (100 x ROOT_RTOL, above rounding)
-STEP_BELOW = 100 * L.ROOT_RTOL
+STEP_BELOW = 100 * searches.ROOT_RTOL
 #: a few ulps of a number in [0, 1] (gamma_2 rounds up by one ulp where it is flat)
 ULPS_UNIT = 1e-15
 #: a normalised margin psi = margin / rho^2 may round down by a few ulps of its terms
@@ -36,7 +40,7 @@ PSI_SLACK = 1e-12
 
 
 @pytest.fixture(scope="module")
-def c() -> L.L1Constants:
+def c() -> L1Constants:
     return load_l1_constants(EXAMPLE)[0]
 
 
@@ -47,7 +51,7 @@ def test_omega_equal_2_lambda_rejected(c) -> None:
     with pytest.raises(SpecError, match=r"2\*lambda.*\|2 lambda - omega\|"):
         design(c, DesignRequest(p=1, lambda_s=100.0, omega=2 * c.lam))
     with pytest.raises(SpecError, match="omega"):
-        L.condition_21a(c, 1, 20.0, 3.0)
+        C.condition_21a(c, 1, 20.0, 3.0)
 
 
 @pytest.mark.parametrize(
@@ -67,21 +71,21 @@ def test_conditions_in_paper_form(c) -> None:
     """lhs/rhs exactly as the brief/paper define them; Theta divided by |2l - w| ONCE."""
     p, w, ls, Ts, rr, ra = 2, 1e3, 100.0, 1e-9, 3.0, 1.0
     rc, tc = A.reference_constants(c, p), A.true_constants(c, p)
-    res = {r.eq: r for r in L.evaluate_conditions(c, p, w, ls, Ts, rr, ra)}
+    res = {r.eq: r for r in C.evaluate_conditions(c, p, w, ls, Ts, rr, ra)}
     gap = abs(2 * c.lam - w)
     kr, ka = 1 - c.k_r, 1 - c.k_a
-    gr, ga = A.gamma_r(rr, w, rc), A.gamma_a(ra, w, tc)
+    gr, ga = S.gamma_r(rr, w, rc), S.gamma_a(ra, w, tc)
     assert res["16a"].lhs == kr * rr**2
     assert res["16a"].rhs == pytest.approx(c.alpha**2 + gr + c.eps_r, rel=REL_CLOSED_FORM)
     assert res["16b"].rhs == pytest.approx(ga + c.eps_a, rel=REL_CLOSED_FORM)
-    assert res["21a"].lhs == pytest.approx(A.theta_r(rr, w, rc) / gap, rel=REL_CLOSED_FORM)
+    assert res["21a"].lhs == pytest.approx(S.theta_r(rr, w, rc) / gap, rel=REL_CLOSED_FORM)
     assert res["21a"].rhs == pytest.approx(kr * rr**2 - c.alpha**2 - gr, rel=REL_CLOSED_FORM)
-    th_a = A.theta_a(ra, rr, w, tc, c.Delta_star) / gap
+    th_a = S.theta_a(ra, rr, w, tc, c.Delta_star) / gap
     assert res["21b"].lhs == pytest.approx(th_a, rel=REL_CLOSED_FORM)
     assert res["24"].rhs == pytest.approx(ka * ra**2 - ga - th_a, rel=REL_CLOSED_FORM)
     s = A.sampling_constants(c, p, w, Ts, ls)
     assert res["24"].lhs == pytest.approx(
-        A.upsilon_sum(ra + rr + c.Delta_star, ra, s), rel=REL_CLOSED_FORM
+        S.upsilon_sum(ra + rr + c.Delta_star, ra, s), rel=REL_CLOSED_FORM
     )
     for r in res.values():
         sign = 1 if r.relation == ">=" else -1
@@ -103,11 +107,11 @@ def test_normalised_margins_non_decreasing(c, p, omega) -> None:
     rc, tc = A.reference_constants(c, p), A.true_constants(c, p)
     xs = np.logspace(-3, 4, 200)
     conds = {
-        "16a": lambda x: L._c16a(c, rc, omega, x),
-        "21a": lambda x: L._c21a(c, rc, omega, x),
-        "16b": lambda y: L._c16b(c, tc, omega, y),
-        "21b": lambda y: L._c21b(c, tc, omega, 3.0, y),
-        "24": lambda y: L._c24(c, tc, p, omega, 100.0, 1e-9, 3.0, y),
+        "16a": lambda x: C.float_16a(c, rc, omega, x),
+        "21a": lambda x: C.float_21a(c, rc, omega, x),
+        "16b": lambda y: C.float_16b(c, tc, omega, y),
+        "21b": lambda y: C.float_21b(c, tc, omega, 3.0, y),
+        "24": lambda y: C.float_24(c, tc, p, omega, 100.0, 1e-9, 3.0, y),
     }
     for name, cond in conds.items():
         psi = _psi(cond, xs)
@@ -128,8 +132,8 @@ def test_envelope_bounds_and_is_monotone_in_Ts(c) -> None:
         for T in Ts:
             se = A.sampling_constants(c, 2, omega, T, ls, envelope=True)
             st = A.sampling_constants(c, 2, omega, T, ls)
-            env.append(A.upsilon_sum(9.0, 1.0, se))
-            true.append(A.upsilon_sum(9.0, 1.0, st))
+            env.append(S.upsilon_sum(9.0, 1.0, se))
+            true.append(S.upsilon_sum(9.0, 1.0, st))
         env, true = np.array(env), np.array(true)
         assert np.all(env >= true * (1 - REL_CLOSED_FORM))
         assert np.all(np.diff(env) >= -PSI_SLACK * env[1:])
@@ -155,29 +159,29 @@ def test_smallest_rho_r_two_ways(c) -> None:
             return r * r - (0.25 + g + 0.01)
 
         ref = brentq(h, 0.1, 100.0, xtol=1e-14, rtol=1e-15)
-        ours = L.smallest_rho_r(c, 1, omega, ("16a",))
+        ours = searches.smallest_rho_r(c, 1, omega, ("16a",))
         assert ours == pytest.approx(ref, rel=REL_TWO_ROOTS)
 
 
 @pytest.mark.parametrize("p", [1, 4])
 @pytest.mark.parametrize("omega", [50.0, 1e3, 1e6])
 def test_returned_roots_are_minimal_and_pass(c, p, omega) -> None:
-    rr = L.smallest_rho_r(c, p, omega)
-    assert L.condition_16a(c, p, omega, rr).holds and L.condition_21a(c, p, omega, rr).holds
+    rr = searches.smallest_rho_r(c, p, omega)
+    assert C.condition_16a(c, p, omega, rr).holds and C.condition_21a(c, p, omega, rr).holds
     below = rr * (1 - STEP_BELOW)
     assert not (
-        L.condition_16a(c, p, omega, below).holds and L.condition_21a(c, p, omega, below).holds
+        C.condition_16a(c, p, omega, below).holds and C.condition_21a(c, p, omega, below).holds
     )
-    ra = L.smallest_rho_a(c, p, omega, rr, lambda_s=100.0, Ts=1e-12)
+    ra = searches.smallest_rho_a(c, p, omega, rr, lambda_s=100.0, Ts=1e-12)
     conds = lambda y: (  # noqa: E731
-        L.condition_16b(c, p, omega, y).holds
-        and L.condition_21b(c, p, omega, rr, y).holds
-        and L.condition_24(c, p, omega, 100.0, 1e-12, rr, y).holds
+        C.condition_16b(c, p, omega, y).holds
+        and C.condition_21b(c, p, omega, rr, y).holds
+        and C.condition_24(c, p, omega, 100.0, 1e-12, rr, y).holds
     )
     assert conds(ra) and not conds(ra * (1 - STEP_BELOW))
-    ts = L.largest_Ts(c, p, omega, 100.0, rr, 1.0 + ra)
-    assert L.condition_24(c, p, omega, 100.0, ts, rr, 1.0 + ra).holds
-    env = L._c24(
+    ts = searches.largest_Ts(c, p, omega, 100.0, rr, 1.0 + ra)
+    assert C.condition_24(c, p, omega, 100.0, ts, rr, 1.0 + ra).holds
+    env = C.float_24(
         c, A.true_constants(c, p), p, omega, 100.0, ts * (1 + STEP_BELOW), rr, 1 + ra, envelope=True
     )
     assert not env.holds
@@ -190,7 +194,7 @@ def test_design_finds_and_rechecks(c) -> None:
     d = design(c, DesignRequest(p=2, lambda_s=100.0, omega=1e3))
     assert d.feasible and d.reason == ""
     assert [r.eq for r in d.conditions] == ["16a", "16b", "21a", "21b", "24"]
-    again = L.evaluate_conditions(c, 2, d.omega, d.lambda_s, d.Ts, d.rho_r, d.rho_a)
+    again = C.evaluate_conditions(c, 2, d.omega, d.lambda_s, d.Ts, d.rho_r, d.rho_a)
     assert again == d.conditions
     assert d.rho == d.rho_r + d.rho_a
     # every condition verified in Arb with a strictly positive margin, off the float roots
@@ -208,7 +212,7 @@ def test_design_finds_and_rechecks(c) -> None:
 def test_all_fixed_only_evaluates_and_infeasible_is_a_result(c) -> None:
     req = DesignRequest(p=1, lambda_s=100.0, omega=1e3, Ts=1e-9, rho_r=3.0, rho_a=1.0)
     d = design(c, req)
-    assert d.conditions == L.evaluate_conditions(c, 1, 1e3, 100.0, 1e-9, 3.0, 1.0)
+    assert d.conditions == C.evaluate_conditions(c, 1, 1e3, 100.0, 1e-9, 3.0, 1.0)
     assert d.feasible and d.verified and d.backoff == ()  # fixed inputs are never moved
     bad = design(c, dataclasses.replace(req, rho_r=1.0))
     assert not bad.feasible and "(16a) fails by" in bad.reason
@@ -239,12 +243,12 @@ def test_lambda_s_free(c) -> None:
 
 
 def test_tradeoff_larger_rho_a_buys_larger_Ts(c) -> None:
-    rows = L.tradeoff_table(c, 1, 1e3, 100.0, n=8)
+    rows = tradeoff_table(c, 1, 1e3, 100.0, n=8)
     ts = [r.Ts_max for r in rows]
     assert all(t is not None for t in ts)
     assert all(b >= a for a, b in zip(ts, ts[1:]))
     assert ts[-1] > 10 * ts[0]
-    rr = L.smallest_rho_r(c, 1, 1e3)
+    rr = searches.smallest_rho_r(c, 1, 1e3)
     assert all(r.rho == pytest.approx(rr + r.rho_a, rel=REL_CLOSED_FORM) for r in rows)
 
 
@@ -252,22 +256,24 @@ def test_tradeoff_larger_rho_a_buys_larger_Ts(c) -> None:
 
 
 def test_kappa_integer_p() -> None:
-    assert L.p_for_delta(math.exp(-2.0), 8) == 1
-    assert L.p_for_delta(math.exp(-2.0) * 0.999, 8) == 2
-    assert L.p_for_delta(math.exp(-6.0), 8) == 3
+    assert radii.p_for_delta(math.exp(-2.0), 8) == 1
+    assert radii.p_for_delta(math.exp(-2.0) * 0.999, 8) == 2
+    assert radii.p_for_delta(math.exp(-6.0), 8) == 3
     with pytest.raises(SpecError, match="p_star"):
-        L.p_for_delta(1e-10, 8)  # needs p = 12
+        radii.p_for_delta(1e-10, 8)  # needs p = 12
     # delta = e^{-2p}: the paper's kappa = e rho exactly
-    assert L.kappa_markov(2.0, 3, math.exp(-6.0)) == pytest.approx(2 * math.e, rel=REL_CLOSED_FORM)
+    assert radii.kappa_markov(2.0, 3, math.exp(-6.0)) == pytest.approx(
+        2 * math.e, rel=REL_CLOSED_FORM
+    )
     rng = np.random.default_rng(7)
     for delta in 10 ** rng.uniform(-6, -0.01, 50):
-        p = L.p_for_delta(float(delta), 8)
-        assert L.kappa_markov(1.0, p, float(delta)) <= math.e * (1 + REL_CLOSED_FORM)
+        p = radii.p_for_delta(float(delta), 8)
+        assert radii.kappa_markov(1.0, p, float(delta)) <= math.e * (1 + REL_CLOSED_FORM)
 
 
 def test_ultimate_bound_below_rho(c) -> None:
     d = design(c, DesignRequest(p=2, lambda_s=100.0, omega=1e3))
-    vals = [L.ultimate_bound(c, d, t) for t in (0.0, 0.01, 0.1, 1.0, 10.0)]
+    vals = [radii.ultimate_bound(c, d, t) for t in (0.0, 0.01, 0.1, 1.0, 10.0)]
     assert all(v < d.rho for v in vals)
     assert all(b <= a for a, b in zip(vals, vals[1:]))
 
@@ -285,13 +291,13 @@ def test_double_integrator_magnitudes(c) -> None:
     Delta_mu, L_mu, L_sigma unspecified); see the report. Our values: 2.068/1.684;
     9.95/2.02/1.71/1.69; rho(p) = 1.83..15.4.
     """
-    r16 = {w: L.smallest_rho_r(c, 1, w, ("16a",)) for w in (50.0, 1e4, 1e6)}
-    r21 = {w: L.smallest_rho_r(c, 1, w, ("21a",)) for w in (50.0, 1e3, 1e5, 1e6)}
+    r16 = {w: searches.smallest_rho_r(c, 1, w, ("16a",)) for w in (50.0, 1e4, 1e6)}
+    r21 = {w: searches.smallest_rho_r(c, 1, w, ("21a",)) for w in (50.0, 1e3, 1e5, 1e6)}
     assert abs(r16[1e4] / r16[1e6] - 1) < 1e-3 and r16[50.0] / r16[1e6] < 1.3
     assert r21[50.0] > r21[1e3] > r21[1e5] > r21[1e6] > r16[1e6]
     assert r21[1e6] / r16[1e6] - 1 < 0.01
-    rr = L.smallest_rho_r(c, 1, 1e3)
-    ts = L.largest_Ts(c, 1, 1e3, 100.0, rr, 1.0)
+    rr = searches.smallest_rho_r(c, 1, 1e3)
+    ts = searches.largest_Ts(c, 1, 1e3, 100.0, rr, 1.0)
     assert 1e-9 < ts < 1e-7
     rho = [design(c, DesignRequest(p=p, lambda_s=100.0, omega=1e6)).rho for p in range(1, 9)]
     assert all(b > a for a, b in zip(rho, rho[1:]))

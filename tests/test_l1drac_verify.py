@@ -12,21 +12,22 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from pathlib import Path
 
 import mpmath
 import numpy as np
 import pytest
 from flint import arb, ctx
+from test_l1drac_constants import di_constants, random_constants
 
-from drip_cert.bounds import l1drac as L
-from drip_cert.bounds import l1drac_appendix as A
-from drip_cert.bounds import l1drac_verify as V
-from drip_cert.bounds.l1drac import DesignRequest, design
-from drip_cert.bounds.l1drac_toml import load_l1_constants
+from drip_cert.bounds.l1drac import appendix as A
+from drip_cert.bounds.l1drac import backend, backoff, searches
+from drip_cert.bounds.l1drac import conditions as C
+from drip_cert.bounds.l1drac import sides as S
+from drip_cert.bounds.l1drac import verify as V
+from drip_cert.bounds.l1drac.constants import CONSTANT_NAMES, L1Constants
+from drip_cert.bounds.l1drac.designer import design
+from drip_cert.bounds.l1drac.request import DesignRequest
 from drip_cert.provenance import How, Quantity
-
-EXAMPLE = Path(__file__).resolve().parents[1] / "examples/l1drac_constants/double_integrator.toml"
 
 #: float64 vs the Arb midpoint of one closed form of Appendix A (a few hundred roundings at most;
 #: the expm1 / phi2 rewrites leave no cancellation), relative to the form's magnitude
@@ -40,32 +41,12 @@ MP_DPS = 60
 #: a bisection root is within ROOT_RTOL of its boundary and the margins have O(1)..O(10)
 #: log-derivatives there, so its margin is below this, relative to its condition's sides (the
 #: issue saw 1e-17 .. 1e-28 for (24))
-KNIFE_EDGE_REL = 100 * L.ROOT_RTOL
+KNIFE_EDGE_REL = 100 * searches.ROOT_RTOL
 #: seeded random constant sets of the designer tests (enough to see sign flips: about 40% of
 #: the float roots of (24) provably fail)
 N_DESIGNS = 30
 #: the largest relative back-off the designer may apply (BACKOFF_STEPS tries)
-MAX_BACKOFF = L.BACKOFF_START * L.BACKOFF_GROWTH ** (L.BACKOFF_STEPS - 1)
-
-
-def di_constants() -> L.L1Constants:
-    """The double-integrator constants of the example file (docs/math/l1drac.md section 8)."""
-    return load_l1_constants(EXAMPLE)[0]
-
-
-def random_constants(rng: np.random.Generator) -> L.L1Constants:
-    """All constants positive (every term of Appendix A exercised), Assumption 7 kept."""
-    d: dict = {}
-    for n in L.CONSTANT_NAMES:
-        if n in ("p_star", "m"):
-            d[n] = int(rng.integers(1, 5))
-        elif n == "lip_f":
-            d[n] = bool(rng.integers(0, 2))
-        else:
-            d[n] = float(rng.uniform(0.1, 2.0))
-    d["lambda"] = float(rng.uniform(4.0, 20.0))  # >= 4 > Delta_g_perp * max(...), each < 2
-    d["p_star"] = 8
-    return L.L1Constants.from_mapping(d)
+MAX_BACKOFF = backoff.BACKOFF_START * backoff.BACKOFF_GROWTH ** (backoff.BACKOFF_STEPS - 1)
 
 
 def random_request(rng: np.random.Generator) -> tuple[int, float, float]:
@@ -82,14 +63,14 @@ def float_root_cases(seed: int, n: int):
     for _ in range(n):
         c = random_constants(rng)
         p, omega, ls = random_request(rng)
-        rr = L.smallest_rho_r(c, p, omega)
-        ra = None if rr is None else L.smallest_rho_a(c, p, omega, rr, which=("16b", "21b"))
-        Ts = None if ra is None else L.largest_Ts(c, p, omega, ls, rr, ra)
+        rr = searches.smallest_rho_r(c, p, omega)
+        ra = None if rr is None else searches.smallest_rho_a(c, p, omega, rr, which=("16b", "21b"))
+        Ts = None if ra is None else searches.largest_Ts(c, p, omega, ls, rr, ra)
         if Ts is not None:
             yield c, p, omega, ls, rr, ra, Ts
 
 
-def boundary_constants() -> L.L1Constants:
+def boundary_constants() -> L1Constants:
     """Constants for which (16a) and (16b) have closed-form roots with an exactly zero margin.
 
     p = 1 (so fraktur p = 0), no diffusion, no unmatched and no matched-parallel uncertainty:
@@ -98,7 +79,7 @@ def boundary_constants() -> L.L1Constants:
     at rho_r = 1, rho_a = 0.5 both margins are exactly 0 (every number is a dyadic rational).
     Delta_f, Delta_mu, L_mu, Delta_Theta > 0 keep the left side of (24) positive, so Ts is finite.
     """
-    d = {n: 0.0 for n in L.CONSTANT_NAMES}
+    d = {n: 0.0 for n in CONSTANT_NAMES}
     d.update(
         {
             "lambda": 10.0,
@@ -115,7 +96,7 @@ def boundary_constants() -> L.L1Constants:
             "lip_f": False,
         }
     )
-    return L.L1Constants.from_mapping(d)
+    return L1Constants.from_mapping(d)
 
 
 def _mp(ball: arb) -> tuple[mpmath.mpf, mpmath.mpf]:
@@ -139,13 +120,13 @@ def test_phi2_ball_encloses_mpmath(x: float) -> None:
     """(e^x - 1 - x)/x^2: the truncated series (|x| < 1e-2) carries its remainder as a radius,
     so the ball contains the 60-digit value on both branches."""
     with ctx.workprec(V.ARB_PREC):
-        ball = A._phi2(arb(x), V.ARB)
+        ball = A._phi2(arb(x), backend.ARB)
     with mpmath.workdps(MP_DPS):
         xm = mpmath.mpf(x)
         exact = (mpmath.expm1(xm) - xm) / xm**2
         assert _contains(ball, exact)
     assert float(ball.rad()) <= REL_ARB_RADIUS * abs(float(ball.mid()))
-    assert abs(A._phi2(x, A.FLOAT) / float(ball.mid()) - 1.0) < REL_FLOAT_VS_ARB
+    assert abs(A._phi2(x, backend.FLOAT) / float(ball.mid()) - 1.0) < REL_FLOAT_VS_ARB
 
 
 @pytest.mark.parametrize("Ts", [1e-14, 1e-9, 1e-4])
@@ -176,12 +157,12 @@ def test_margin_balls_at_two_precisions_overlap(seed: int) -> None:
     c = random_constants(rng)
     p, omega, ls = random_request(rng)
     kw = {"lambda_s": ls, "Ts": 1e-9, "rho_r": 3.0, "rho_a": 2.0}
-    b128 = V.margin_balls(c, p, omega, **kw, prec=128)
-    b256 = V.margin_balls(c, p, omega, **kw, prec=256)
+    b128 = V.verify_conditions(c, p, omega, **kw, prec=128)
+    b256 = V.verify_conditions(c, p, omega, **kw, prec=256)
     assert set(b128) == set(V.CONDITIONS)
     for eq in V.CONDITIONS:
-        assert b128[eq].overlaps(b256[eq]), eq
-        assert b256[eq].rad() <= b128[eq].rad(), eq
+        assert b128[eq].ball.overlaps(b256[eq].ball), eq
+        assert b256[eq].ball.rad() <= b128[eq].ball.rad(), eq
 
 
 # ------------------------------------------------------------------ one code, two arithmetics
@@ -236,7 +217,7 @@ def test_float_and_arb_evaluations_agree(seed: int) -> None:
             for key in fl:
                 fa, aa = _fields(fl[key]), _fields(ab[key])
                 for name, v in fa.items():
-                    assert _close(float(v), V.ARB.const(aa[name]), 0.0), (key, name)
+                    assert _close(float(v), backend.ARB.const(aa[name]), 0.0), (key, name)
             maps = (
                 A.upsilon1_prime,
                 A.upsilon2_prime,
@@ -247,40 +228,40 @@ def test_float_and_arb_evaluations_agree(seed: int) -> None:
             for f in maps:
                 assert _close(f(xi, fl["s"]), f(arb(xi), ab["s"]), 0.0), f.__name__
             assert _close(A.upsilon_ring(xi, c, p, omega), A.upsilon_ring(arb(xi), ac, p, w), 0.0)
-            for f in (A.upsilon_a1, A.upsilon_a2, A.upsilon_a3, A.upsilon_sum):
+            for f in (S.upsilon_a1, S.upsilon_a2, S.upsilon_a3, S.upsilon_sum):
                 assert _close(f(xi, ra, fl["s"]), f(arb(xi), arb(ra), ab["s"]), 0.0), f.__name__
-            for f, k in ((A.gamma_r, "rc"), (A.theta_r, "rc"), (A.gamma_a, "tc")):
+            for f, k in ((S.gamma_r, "rc"), (S.theta_r, "rc"), (S.gamma_a, "tc")):
                 assert _close(f(rr, omega, fl[k]), f(arb(rr), w, ab[k]), 0.0), f.__name__
-            th = A.theta_a(ra, rr, omega, fl["tc"], c.Delta_star)
-            assert _close(th, A.theta_a(arb(ra), arb(rr), w, ab["tc"], ac.Delta_star), 0.0)
+            th = S.theta_a(ra, rr, omega, fl["tc"], c.Delta_star)
+            assert _close(th, S.theta_a(arb(ra), arb(rr), w, ab["tc"], ac.Delta_star), 0.0)
             # the conditions: each side, and the margin relative to the sum of its terms
-            b, tha, ga = A.budget_a(c, fl["tc"], omega, rr, ra)
-            l16a, r16a = A.sides_16a(c, fl["rc"], omega, rr)
-            l16b, r16b = A.sides_16b(c, fl["tc"], omega, ra)
+            b, tha, ga = S.budget_a(c, fl["tc"], omega, rr, ra)
+            l16a, r16a = S.sides_16a(c, fl["rc"], omega, rr)
+            l16b, r16b = S.sides_16b(c, fl["tc"], omega, ra)
             scale = {
                 "16a": abs(l16a) + abs(r16a),
                 "16b": abs(l16b) + abs(r16b),
-                "21a": abs(l16a) + abs(r16a) + A.theta_r(rr, omega, fl["rc"]),
+                "21a": abs(l16a) + abs(r16a) + S.theta_r(rr, omega, fl["rc"]),
                 "21b": abs(b) + 2 * ga + tha,
                 "24": abs(b) + 2 * ga + tha,
             }
             sides_f = {
                 "16a": (l16a, r16a),
                 "16b": (l16b, r16b),
-                "21a": A.sides_21a(c, fl["rc"], omega, rr),
-                "21b": A.sides_21b(c, fl["tc"], omega, rr, ra),
-                "24": A.sides_24(c, fl["tc"], p, omega, ls, Ts, rr, ra),
+                "21a": S.sides_21a(c, fl["rc"], omega, rr),
+                "21b": S.sides_21b(c, fl["tc"], omega, rr, ra),
+                "24": S.sides_24(c, fl["tc"], p, omega, ls, Ts, rr, ra),
             }
             sides_a = {
-                "16a": A.sides_16a(ac, ab["rc"], w, arb(rr)),
-                "16b": A.sides_16b(ac, ab["tc"], w, arb(ra)),
-                "21a": A.sides_21a(ac, ab["rc"], w, arb(rr)),
-                "21b": A.sides_21b(ac, ab["tc"], w, arb(rr), arb(ra)),
-                "24": A.sides_24(ac, ab["tc"], p, w, la, T, arb(rr), arb(ra)),
+                "16a": S.sides_16a(ac, ab["rc"], w, arb(rr)),
+                "16b": S.sides_16b(ac, ab["tc"], w, arb(ra)),
+                "21a": S.sides_21a(ac, ab["rc"], w, arb(rr)),
+                "21b": S.sides_21b(ac, ab["tc"], w, arb(rr), arb(ra)),
+                "24": S.sides_24(ac, ab["tc"], p, w, la, T, arb(rr), arb(ra)),
             }
-            margins_a = {eq: A.margin_of(eq, *sides_a[eq]) for eq in V.CONDITIONS}
+            margins_a = {eq: S.margin_of(eq, *sides_a[eq]) for eq in V.CONDITIONS}
         for eq in V.CONDITIONS:
-            mf = A.margin_of(eq, *sides_f[eq])
+            mf = S.margin_of(eq, *sides_f[eq])
             ma = margins_a[eq]
             assert abs(mf - float(ma.mid())) <= REL_MARGIN_VS_TERMS * scale[eq], eq
             assert float(ma.rad()) <= REL_ARB_RADIUS * scale[eq], eq
@@ -293,24 +274,26 @@ def test_exact_zero_margin_is_not_verified() -> None:
     """A condition that holds with equality (margin exactly 0, closed form) is not verified:
     the float comparison ``>=`` says it holds, the Arb margin is the exact ball 0."""
     c = boundary_constants()
-    res = {r.eq: r for r in L.evaluate_conditions(c, 1, 1e3, 100.0, 1e-9, 1.0, 0.5)}
+    res = {r.eq: r for r in C.evaluate_conditions(c, 1, 1e3, 100.0, 1e-9, 1.0, 0.5)}
     for eq in ("16a", "16b"):
         assert res[eq].margin == 0.0 and res[eq].holds, eq
         assert res[eq].margin_lo == 0.0 == res[eq].margin_hi, eq
         assert not res[eq].verified, eq
     # the old designer's roots sit exactly there: the searches start at the closed-form bound
-    assert L.smallest_rho_r(c, 1, 1e3, ("16a",)) == 1.0
-    assert L.smallest_rho_a(c, 1, 1e3, 1.0, which=("16b",)) == 0.5
+    assert searches.smallest_rho_r(c, 1, 1e3, ("16a",)) == 1.0
+    assert searches.smallest_rho_a(c, 1, 1e3, 1.0, which=("16b",)) == 0.5
     d = design(c, DesignRequest(p=1, omega=1e3, lambda_s=100.0))
     assert d.feasible and d.verified
-    assert d.rho_r == 1.0 * (1.0 + L.BACKOFF_START) and d.rho_a == 0.5 * (1.0 + L.BACKOFF_START)
+    assert d.rho_r == 1.0 * (1.0 + backoff.BACKOFF_START) and d.rho_a == 0.5 * (
+        1.0 + backoff.BACKOFF_START
+    )
     assert all(r.margin_lo > 0.0 and r.holds for r in d.conditions)
 
 
 def test_designer_gives_up_when_no_back_off_is_allowed(monkeypatch) -> None:
     """With a zero back-off the exact boundary point can never be verified: the designer stops
     after BACKOFF_STEPS tries and reports the design infeasible with the reason."""
-    monkeypatch.setattr(L, "BACKOFF_START", 0.0)
+    monkeypatch.setattr(backoff, "BACKOFF_START", 0.0)
     d = design(boundary_constants(), DesignRequest(p=1, omega=1e3, lambda_s=100.0))
     assert not d.feasible and not d.verified
     assert "(16a) is not verified" in d.reason and "rho_r" in d.reason
@@ -327,7 +310,7 @@ def _arb_boundary_of_24(c, p, omega, ls, rr, ra) -> tuple[float, float]:
         assert m.verified or m.hi < 0.0, "a 128-bit ball straddles 0: refine the precision"
         return 1 if m.verified else -1
 
-    t = L.largest_Ts(c, p, omega, ls, rr, ra)
+    t = searches.largest_Ts(c, p, omega, ls, rr, ra)
     lo, hi = t / 2.0, t * 2.0
     while verdict(lo) < 0:
         lo /= 2.0
@@ -352,8 +335,8 @@ def test_arb_rejects_the_double_just_across_the_24_boundary() -> None:
         ra = 2.0 * ra_min
         t_in, t_out = _arb_boundary_of_24(c, p, omega, ls, rr, ra)
         assert t_out == math.nextafter(t_in, math.inf)
-        inside = L.condition_24(c, p, omega, ls, t_in, rr, ra)
-        across = L.condition_24(c, p, omega, ls, t_out, rr, ra)
+        inside = C.condition_24(c, p, omega, ls, t_in, rr, ra)
+        across = C.condition_24(c, p, omega, ls, t_out, rr, ra)
         assert inside.verified and inside.margin_lo > 0.0
         assert not across.verified and across.margin_hi < 0.0
         for r in (inside, across):
@@ -371,7 +354,7 @@ def test_float_roots_are_knife_edge_and_some_provably_fail() -> None:
     its condition, and Arb proves some of them wrong (the sign flips the issue reports)."""
     flipped = 0
     for c, p, omega, ls, rr, ra, Ts in float_root_cases(7, N_DESIGNS):
-        res = L.evaluate_conditions(c, p, omega, ls, Ts, rr, ra)
+        res = C.evaluate_conditions(c, p, omega, ls, Ts, rr, ra)
         assert all(r.holds for r in res)
         assert min(r.margin / max(abs(r.lhs), abs(r.rhs)) for r in res) < KNIFE_EDGE_REL
         flipped += any(r.margin_hi < 0.0 for r in res)
@@ -382,7 +365,7 @@ def test_designer_returns_verified_interior_points() -> None:
     """On the same seeded constant sets, every design is feasible, every condition is verified
     with a strictly positive Arb margin and holds in float64, and the back-off factors are the
     stated ones: each in 1 + BACKOFF_START * BACKOFF_GROWTH^k, k < BACKOFF_STEPS."""
-    allowed = set(L._backoff_factors())
+    allowed = set(backoff.backoff_factors())
     n = 0
     for c, p, omega, ls, rr, ra, _ in float_root_cases(7, N_DESIGNS):
         d = design(c, DesignRequest(p=p, omega=omega, lambda_s=ls))
@@ -391,9 +374,9 @@ def test_designer_returns_verified_interior_points() -> None:
         assert all(r.verified and r.margin_lo > 0.0 and r.holds for r in d.conditions)
         assert set(dict(d.backoff)) == {"rho_r", "rho_a", "Ts"}
         assert set(dict(d.backoff).values()) <= allowed
-        assert dict(d.backoff)["rho_r"] == 1.0 + L.BACKOFF_START  # no rounding issue in (16a)
+        assert dict(d.backoff)["rho_r"] == 1.0 + backoff.BACKOFF_START  # no rounding issue in (16a)
         # the returned point re-checks to the same verdicts, a hair inside the float roots
-        assert L.evaluate_conditions(c, p, omega, ls, d.Ts, d.rho_r, d.rho_a) == d.conditions
+        assert C.evaluate_conditions(c, p, omega, ls, d.Ts, d.rho_r, d.rho_a) == d.conditions
         assert d.rho_r == rr * dict(d.backoff)["rho_r"] and d.rho_a >= ra
         assert d.rho <= (rr + ra) * (1.0 + MAX_BACKOFF)
         n += 1
@@ -408,7 +391,7 @@ def test_fixed_inputs_are_never_changed() -> None:
     d = design(c, req)
     assert d.feasible and d.verified and d.backoff == ()
     assert (d.omega, d.lambda_s, d.Ts, d.rho_r, d.rho_a) == (1e3, 100.0, 1e-9, 3.0, 1.0)
-    rr = L.smallest_rho_r(c, 1, 1e3)
+    rr = searches.smallest_rho_r(c, 1, 1e3)
     _, t_out = _arb_boundary_of_24(c, 1, 1e3, 100.0, rr, 1.0)
     edge = design(c, dataclasses.replace(req, Ts=t_out, rho_r=rr))
     assert (edge.Ts, edge.rho_r, edge.rho_a) == (t_out, rr, 1.0) and edge.backoff == ()
@@ -419,7 +402,7 @@ def test_fixed_inputs_are_never_changed() -> None:
 def test_design_label_is_computed_from_inputs() -> None:
     """The provenance of a design's verdict is weakest(VERIFY_METHOD, inputs), never a literal."""
     d = design(di_constants(), DesignRequest(p=1, lambda_s=100.0, omega=1e3))
-    assert L.VERIFY_METHOD == How.EXACT and d.label() == How.EXACT
+    assert V.VERIFY_METHOD == How.EXACT and d.label() == How.EXACT
     assert d.label([How.SOUND, How.GIVEN]) == How.GIVEN
     assert d.label([Quantity("lambda", 10.0, How.ESTIMATE)]) == How.ESTIMATE
 
@@ -442,7 +425,7 @@ def test_json_keeps_old_keys_and_adds_the_verified_margins() -> None:
 def test_arb_view_is_read_only_and_exact() -> None:
     c = di_constants()
     ac = V.ArbConstants(c)
-    assert ac.num is V.ARB and ac.m == c.m and ac.lip_f is c.lip_f
+    assert ac.num is backend.ARB and ac.m == c.m and ac.lip_f is c.lip_f
     assert ac.lam.is_exact() and ac.lam == arb(c.lam)
     with pytest.raises(AttributeError):
         ac.lam = arb(1.0)

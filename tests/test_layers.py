@@ -21,6 +21,7 @@ PKG = ROOT / "drip_cert"
 LAYERS: dict[str, int] = {
     "errors": 1,
     "provenance": 1,
+    "progress": 1,
     "_jax": 2,
     "numerics": 2,
     "model": 3,

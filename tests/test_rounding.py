@@ -25,6 +25,8 @@ from drip_cert.numerics.rounding import (
     add_up,
     arb_hi,
     arb_lo,
+    arb_norm2_up,
+    arb_sqrt_up,
     div_down,
     div_up,
     down,
@@ -35,6 +37,7 @@ from drip_cert.numerics.rounding import (
     mul_down,
     mul_up,
     ndtr_rel_budget,
+    nonneg_spectral_norm_upper,
     norm2_up,
     norm2_up_np,
     spectral_norm_upper,
@@ -259,3 +262,37 @@ def test_spectral_norm_upper_batched_and_degenerate():
     # rank one: ||u v^T|| = ||u|| ||v|| exactly
     u, v = np.array([3.0, 4.0]), np.array([1.0, 0.0, 0.0])
     assert 5.0 <= spectral_norm_upper(np.outer(u, v)) <= 5.0 * (1 + RIGOROUS_EXCESS)
+
+
+# ------------------------------------------------------------------------- Arb twins
+@settings(max_examples=200)
+@given(xs=st.lists(_moderate, min_size=0, max_size=20))
+def test_arb_norm2_and_sqrt_bound_the_exact_values(xs):
+    exact_sq = sum((_q(x) ** 2 for x in xs), Fraction(0))
+    ub = arb_norm2_up(xs)
+    assert _q(ub) ** 2 >= exact_sq
+    # never more than a few ulps above the correctly rounded float twin
+    assert ub <= up(norm2_up(xs), 4)
+    s = abs(xs[0]) if xs else 0.0
+    r = arb_sqrt_up(s)
+    assert _q(r) ** 2 >= _q(s) and r <= up(sqrt_up(s), 2)
+
+
+def test_arb_sqrt_and_norm_ends():
+    # a negative upper bound of a nonnegative quantity reads as 0 (one ulp up: Arb's outward step)
+    assert arb_sqrt_up(-1e-300) == up(0.0)
+    assert arb_sqrt_up(math.inf) == math.inf and arb_sqrt_up(math.nan) == math.inf
+    assert arb_norm2_up([]) == up(0.0) and arb_norm2_up([3.0, 4.0]) == up(5.0)
+    assert arb_norm2_up([1.0, math.inf]) == math.inf
+
+
+@settings(max_examples=40)
+@given(seed=st.integers(0, 2**31), m=st.integers(1, 7), n=st.integers(1, 5))
+def test_nonneg_spectral_norm_upper_is_rigorous_and_tight(seed, m, n):
+    M = np.abs(np.random.default_rng(seed).normal(size=(m, n)))
+    ub = nonneg_spectral_norm_upper(M)
+    exact = max(mp.svd_r(mp.matrix(M.tolist()), compute_uv=False))
+    assert mp.mpf(ub) >= exact
+    # Collatz-Wielandt with the float Perron vector: excess of order n eps ||M||
+    assert mp.mpf(ub) - exact <= RIGOROUS_EXCESS * (1 + exact)
+    assert nonneg_spectral_norm_upper(np.zeros((m, n))) == 0.0

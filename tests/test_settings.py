@@ -292,7 +292,7 @@ def test_readme_settings_tables_are_valid(tmp_path):
 
 # ------------------------------------------------------------------ one list of constants
 def test_constant_names_are_the_l1drac_real_constants():
-    from drip_cert.bounds.l1drac import _REAL_FIELDS
+    from drip_cert.bounds.l1drac.constants import _REAL_FIELDS
 
     assert CONSTANT_NAMES == tuple(n for n, _ in _REAL_FIELDS)
 

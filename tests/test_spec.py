@@ -57,7 +57,7 @@ def test_numeric_functions_match_symbolic(tmp_path):
 
 
 def test_paper_example_loads_and_expert_cancels_h():
-    spec = load_spec("examples/paper_4d/paper_4d.toml")
+    spec = load_spec("drip_cert/data/paper_4d/paper_4d.toml")
     J = spec.system.closed_loop_jacobian("expert")
     assert J == -sp.Rational(1, 10) * sp.eye(4)
 

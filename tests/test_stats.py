@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 
+import mpmath
 import numpy as np
 import pytest
 import scipy.stats
@@ -116,6 +117,118 @@ def test_clopper_pearson_upper():
     assert np.all(up > ks / n)
     # defining equation: P(Bin(n, upper) <= k) = 1 - level
     np.testing.assert_allclose(scipy.stats.binom.cdf(ks, n, up), 1 - level, atol=CP_ATOL)
+
+
+# Values of the two Clopper-Pearson functions drip-cert had before they became one (recorded from
+# the code of commit 30a5c84): the TaSIL held-out form's clopper_pearson_upper(k, n, delta) of
+# drip_cert/bounds/tasil.py (Arb-verified, called with the failure probability delta) and
+# clopper_pearson_upper / clopper_pearson_lower(k, n, level) of this module (scipy's quantile).
+# The one implementation reproduces both to the last bit.
+FORMER_TASIL_CP = [  # (k, n, delta, bound)
+    (1, 7, 0.1, 0.45256494335779973),
+    (0, 40, 0.05, 0.07215752450551459),
+    (2, 40, 0.025, 0.16919686395941766),
+    (13, 40, 0.05, 0.4662950987058696),
+    (20, 40, 0.001, 0.7396332798521307),
+    (39, 40, 0.05, 0.9987184894771248),
+    (40, 40, 0.05, 1.0),
+    (0, 200, 0.05, 0.014867039231272059),
+    (66, 200, 0.3, 0.3503764987550536),
+    (999, 1000, 0.5, 0.9993070929904526),
+    (0, 12345, 1e-06, 0.001118491927771959),
+    (4115, 12345, 1e-06, 0.3537406898005782),
+]
+FORMER_STATS_CP_UPPER = [  # (k, n, level, bound)
+    (1, 7, 0.9, 0.4525649433577997),
+    (0, 40, 0.95, 0.07215752450551455),
+    (2, 40, 0.975, 0.16919686395941763),
+    (13, 40, 0.99, 0.5203113754560791),
+    (39, 40, 0.95, 0.9987184894771247),
+    (40, 40, 0.95, 1.0),
+    (66, 200, 0.999, 0.43970020291016665),
+    (333, 1000, 0.3, 0.32576998166356375),
+    (4115, 12345, 0.9999875, 0.3514146256082909),
+]
+FORMER_STATS_CP_LOWER = [  # (k, n, level, bound)
+    (1, 7, 0.9, 0.014938794558884472),
+    (0, 40, 0.95, 0.0),
+    (13, 40, 0.99, 0.1655404651856619),
+    (40, 40, 0.95, 0.9278424754944854),
+    (4115, 12345, 0.9999875, 0.31558174754595836),
+]
+
+CP_SOUND_RTOL = 1e-11
+"""The sound bound is scipy's quantile moved up until Arb proves it: at most a few 1e-12 steps
+(scipy's quantile is accurate to ~1e-12 relative) above the plain one."""
+
+CP_CLOSED_RTOL = 4 * np.finfo(np.float64).eps
+"""The sound k = 0 bound is the Arb enclosure of the closed form, its upper end moved one ulp:
+within a few ulps of the exact value."""
+
+
+@pytest.mark.parametrize("k, n, delta, want", FORMER_TASIL_CP)
+def test_clopper_pearson_reproduces_the_former_tasil_bound(k, n, delta, want):
+    got = clopper_pearson_upper(k, n, alpha=delta, sound=True)
+    assert float(got) == want and np.shape(got) == ()
+
+
+@pytest.mark.parametrize("k, n, level, want", FORMER_STATS_CP_UPPER)
+def test_clopper_pearson_reproduces_the_former_upper_bound(k, n, level, want):
+    assert float(clopper_pearson_upper(k, n, level)) == want
+
+
+@pytest.mark.parametrize("k, n, level, want", FORMER_STATS_CP_LOWER)
+def test_clopper_pearson_reproduces_the_former_lower_bound(k, n, level, want):
+    assert float(clopper_pearson_lower(k, n, level)) == want
+
+
+def test_clopper_pearson_closed_forms_and_log_bound():
+    """k = 0: upper = 1 - (1 - level)^(1/n) <= log(1/(1 - level)) / n; k = n: upper = 1."""
+    for n in (1, 10, 100, 1000, 10_000):
+        for alpha in (0.5, 0.05, 1e-3, 1e-6):
+            with mpmath.workdps(50):
+                exact = 1 - mpmath.mpf(alpha) ** (mpmath.mpf(1) / n)
+            sound = float(clopper_pearson_upper(0, n, alpha=alpha, sound=True))
+            assert exact <= sound <= exact * (1 + CP_CLOSED_RTOL)
+            assert sound <= math.log(1 / alpha) / n
+            plain = float(clopper_pearson_upper(0, n, 1 - alpha))
+            assert plain == pytest.approx(float(exact), rel=CP_SOUND_RTOL)
+            for kw in ({"alpha": alpha, "sound": True}, {"alpha": alpha}):
+                assert float(clopper_pearson_upper(n, n, **kw)) == 1.0
+
+
+def test_clopper_pearson_sound_bound_is_the_plain_one_rounded_up():
+    n, level = 40, 0.95
+    ks = np.arange(n + 1).reshape(1, n + 1)
+    plain = clopper_pearson_upper(ks, n, level)
+    sound = clopper_pearson_upper(ks, n, level, sound=True)
+    assert sound.shape == ks.shape
+    assert np.all(sound >= plain) and np.all(sound <= plain * (1 + CP_SOUND_RTOL))
+    assert np.all(np.diff(sound) > 0) and sound[0, -1] == 1.0
+    # a level and its miss probability name the same confidence (1 - level is exact in floats
+    # for level >= 1/2, Sterbenz); the float 0.05 is not 1 - 0.95
+    by_miss = clopper_pearson_upper(ks, n, alpha=1 - level, sound=True)
+    np.testing.assert_array_equal(sound, by_miss)
+
+
+def test_clopper_pearson_sound_exact_coverage():
+    """P_p[p > CP(K)] computed exactly from the binomial pmf stays below delta for every p."""
+    n, delta = 30, 0.1
+    cps = clopper_pearson_upper(np.arange(n + 1), n, alpha=delta, sound=True)
+    for p in np.linspace(0.001, 0.999, 300):
+        miss = scipy.stats.binom.pmf(np.arange(n + 1), n, p)[cps < p].sum()
+        assert miss <= delta + CP_ATOL
+
+
+def test_clopper_pearson_argument_errors():
+    with pytest.raises(TypeError, match="exactly one"):
+        clopper_pearson_upper(1, 10, 0.95, alpha=0.05)
+    with pytest.raises(TypeError, match="exactly one"):
+        clopper_pearson_upper(1, 10)
+    with pytest.raises(SpecError, match="integers"):
+        clopper_pearson_upper(1.5, 10, 0.95, sound=True)
+    with pytest.raises(SpecError, match="confidence"):
+        clopper_pearson_upper(1, 10, alpha=1.5, sound=True)
 
 
 def test_clopper_pearson_lower():

@@ -23,7 +23,7 @@ from drip_cert.numerics.stats import (
     new_sums,
     t_one_sided,
 )
-from drip_cert.validate import (
+from drip_cert.validate.checks import (
     HOLDS,
     NOT_CHECKED,
     NOTHING_CHECKED,
@@ -106,7 +106,7 @@ def _certified(**kw):
 
 
 def _by_name(checks):
-    return {c["name"]: c for c in checks}
+    return {c.name: c for c in checks}
 
 
 # ---------------------------------------------------------------------------------- statuses
@@ -122,14 +122,14 @@ def test_within_bounds_holds():
         "tail_frequency",
         "total_tail",
     ):
-        assert checks[name]["status"] == HOLDS, (name, checks[name]["reason"])
-        assert checks[name]["holds"] is True
-        assert checks[name]["confidence_low"] <= checks[name]["bound"]
-        assert checks[name]["ratio"] > 1.0
+        assert checks[name].status == HOLDS, (name, checks[name].reason)
+        assert checks[name].holds is True
+        assert checks[name].confidence_low <= checks[name].bound
+        assert checks[name].ratio > 1.0
     # the expectation numbers next to radii are information only, never "holds"
     for name in ("policy_gap", "total_gap"):
-        assert checks[name]["status"] == NOT_CHECKED
-        assert checks[name]["reason"].startswith("information only")
+        assert checks[name].status == NOT_CHECKED
+        assert checks[name].reason.startswith("information only")
     assert overall_status(list(checks.values())) == HOLDS
 
 
@@ -138,8 +138,8 @@ def test_nothing_finite_checked_is_nothing_checked():
     checks = checks_from_result(
         res, rho_tasil=math.inf, delta_tasil=0.1, rho_l1=None, p=1, kappa=None, delta_l1=None
     )
-    assert all(c["status"] == NOT_CHECKED and c["holds"] is False for c in checks)
-    assert all(c["reason"] for c in checks)
+    assert all(c.status == NOT_CHECKED and c.holds is False for c in checks)
+    assert all(c.reason for c in checks)
     assert overall_status(checks) == NOTHING_CHECKED
     assert overall_status([]) == NOTHING_CHECKED
 
@@ -147,29 +147,29 @@ def test_nothing_finite_checked_is_nothing_checked():
 def test_vacuous_tasil_radius_is_not_checked():
     res = _result(_small(0, 0.05), _small(1, 0.05), _small(2, 0.1))
     checks = _by_name(checks_from_result(res, **_certified(rho_tasil=math.inf)))
-    assert checks["policy_radius"]["status"] == NOT_CHECKED
-    assert "vacuous" in checks["policy_radius"]["reason"]
+    assert checks["policy_radius"].status == NOT_CHECKED
+    assert "vacuous" in checks["policy_radius"].reason
     # the total needs rho_TaSIL too; the L1 checks do not
-    assert checks["total_tail"]["status"] == NOT_CHECKED
-    assert checks["tail_frequency"]["status"] == HOLDS
+    assert checks["total_tail"].status == NOT_CHECKED
+    assert checks["tail_frequency"].status == HOLDS
 
 
 def test_nan_empirical_is_not_checked_never_holds():
     nan = np.full(N_TIMES, np.nan)
     c = check_mean("m", nan, nan, N_PATHS, 1.0, LEVEL, times=TIMES)
-    assert c["status"] == NOT_CHECKED and not c["holds"]
+    assert c.status == NOT_CHECKED and not c.holds
     # NaN at one time only, the others far inside the bound: the sup over t is unknown
     s1 = np.full(N_TIMES, 0.1 * N_PATHS)
     s2 = np.full(N_TIMES, 0.02 * N_PATHS)
     s1[5] = np.nan
     c = check_mean("m", s1, s2, N_PATHS, 1.0, LEVEL, times=TIMES)
-    assert c["status"] == NOT_CHECKED and "non-finite" in c["reason"]
+    assert c.status == NOT_CHECKED and "non-finite" in c.reason
     # a per-path sample of NaNs: nothing is known
     c = check_radius("r", np.full(50, np.nan), 1.0, 0.1, LEVEL)
-    assert c["status"] == NOT_CHECKED and not c["holds"]
+    assert c.status == NOT_CHECKED and not c.holds
     # no valid path for a tail check
     c = check_tail("t", np.zeros(N_TIMES), 0, 1.0, 0.1, LEVEL, n_total=N_PATHS)
-    assert c["status"] == NOT_CHECKED and "no valid paths" in c["reason"]
+    assert c.status == NOT_CHECKED and "no valid paths" in c.reason
 
 
 def test_not_at_certified_parameters_never_counts_but_the_policy_radius_does():
@@ -180,11 +180,11 @@ def test_not_at_certified_parameters_never_counts_but_the_policy_radius_does():
         )
     )
     for name in ("uncertainty_gap", "uncertainty_L2_norm", "tail_frequency", "total_tail"):
-        assert checks[name]["status"] == NOT_CHECKED
-        assert "not at certified parameters" in checks[name]["reason"]
-        assert "not at certified parameters" in checks[name]["note"]
+        assert checks[name].status == NOT_CHECKED
+        assert "not at certified parameters" in checks[name].reason
+        assert "not at certified parameters" in checks[name].note
     # the two nominal processes do not involve the L1-DRAC parameters
-    assert checks["policy_radius"]["status"] == HOLDS
+    assert checks["policy_radius"].status == HOLDS
 
 
 # ------------------------------------------------------------------------ like with like
@@ -199,18 +199,18 @@ def test_radius_violated_although_the_mean_is_below_rho():
     res = _result(policy, _small(1, 0.05), _small(2, 0.1))
     checks = _by_name(checks_from_result(res, **_certified()))
     rad = checks["policy_radius"]
-    assert rad["status"] == VIOLATED and rad["holds"] is False
-    assert rad["exceed_frequency"] == pytest.approx(0.3, abs=0.5 / N_PATHS)
-    assert rad["exceed_confidence_low"] > DELTA_TASIL
+    assert rad.status == VIOLATED and rad.holds is False
+    assert rad.extra["exceed_frequency"] == pytest.approx(0.3, abs=0.5 / N_PATHS)
+    assert rad.extra["exceed_confidence_low"] > DELTA_TASIL
     # the same test in radius units: the lower confidence bound of the 0.9-quantile exceeds rho
-    assert rad["confidence_low"] > RHO_TASIL and rad["empirical"] == 2.0 * RHO_TASIL
+    assert rad.confidence_low > RHO_TASIL and rad.empirical == 2.0 * RHO_TASIL
     # the old comparison, max_t E||x' - x*|| against rho_TaSIL, would have said "holds"
     pol = res.gap("policy")
     assert pol.max_mean < RHO_TASIL
     _, mean_low, _ = t_one_sided(pol.power_sums[0], pol.power_sums[1], pol.n, LEVEL)
     assert np.max(mean_low) < RHO_TASIL
-    assert checks["policy_gap"]["empirical"] < checks["policy_gap"]["bound"]
-    assert checks["policy_gap"]["status"] == NOT_CHECKED  # reported, not checked
+    assert checks["policy_gap"].empirical < checks["policy_gap"].bound
+    assert checks["policy_gap"].status == NOT_CHECKED  # reported, not checked
     assert overall_status(list(checks.values())) == VIOLATED
 
 
@@ -220,8 +220,8 @@ def test_radius_frequency_test_and_quantile_bound_agree():
         x = rng.uniform(0.0, 0.5, size=N_PATHS)
         x[: int(frac * N_PATHS)] = 1.5
         c = check_radius("r", x, 1.0, 0.1, LEVEL)
-        assert (c["confidence_low"] > 1.0) == (c["exceed_confidence_low"] > 0.1)
-        assert c["status"] == (VIOLATED if c["exceed_confidence_low"] > 0.1 else HOLDS)
+        assert (c.confidence_low > 1.0) == (c.extra["exceed_confidence_low"] > 0.1)
+        assert c.status == (VIOLATED if c.extra["exceed_confidence_low"] > 0.1 else HOLDS)
 
 
 def test_total_uses_rho_tasil_plus_kappa_and_delta_sum():
@@ -234,22 +234,22 @@ def test_total_uses_rho_tasil_plus_kappa_and_delta_sum():
     total[hit, 1:] = 1.01 * thr
     res = _result(_small(0, 0.05), _small(1, 0.05), total)
     tot = _by_name(checks_from_result(res, **_certified()))["total_tail"]
-    assert tot["threshold"] == thr
-    assert tot["bound"] == pytest.approx(DELTA_TASIL + DELTA_L1, abs=1e-15)
-    assert tot["empirical"] == pytest.approx(0.28, abs=0.5 / N_PATHS)
-    assert tot["status"] == HOLDS
+    assert tot.extra["threshold"] == thr
+    assert tot.bound == pytest.approx(DELTA_TASIL + DELTA_L1, abs=1e-15)
+    assert tot.empirical == pytest.approx(0.28, abs=0.5 / N_PATHS)
+    assert tot.status == HOLDS
     # the lower bound exceeds delta_L1 alone: the union bound is what makes it hold
-    assert tot["confidence_low"] > DELTA_L1
+    assert tot.confidence_low > DELTA_L1
     # at 50% beyond the threshold even delta_TaSIL + delta_L1 is exceeded
     total[rng.permutation(N_PATHS)[: N_PATHS // 2], 1:] = 1.01 * thr
     res = _result(_small(0, 0.05), _small(1, 0.05), total)
     tot = _by_name(checks_from_result(res, **_certified()))["total_tail"]
-    assert tot["status"] == VIOLATED
+    assert tot.status == VIOLATED
     # the frequency just AT the threshold counts too: (130a) and the union bound are for ">="
     total = _small(2, 0.1)
     total[: N_PATHS // 2, 1:] = thr
     res = _result(_small(0, 0.05), _small(1, 0.05), total)
-    assert _by_name(checks_from_result(res, **_certified()))["total_tail"]["status"] == VIOLATED
+    assert _by_name(checks_from_result(res, **_certified()))["total_tail"].status == VIOLATED
 
 
 def test_l2p_norm_uses_a_lower_confidence_bound():
@@ -261,16 +261,16 @@ def test_l2p_norm_uses_a_lower_confidence_bound():
     r *= RHO_L1 * (1.0 + NOISE_EXCESS) / l2.max()
     res = _result(_small(0, 0.05), r, _small(2, 0.1))
     lp = _by_name(checks_from_result(res, **_certified()))["uncertainty_L2_norm"]
-    assert lp["empirical"] > RHO_L1  # the point estimate says "above the bound"...
-    assert lp["confidence_low"] < RHO_L1  # ...the lower confidence bound does not
-    assert lp["status"] == HOLDS
+    assert lp.empirical > RHO_L1  # the point estimate says "above the bound"...
+    assert lp.confidence_low < RHO_L1  # ...the lower confidence bound does not
+    assert lp.status == HOLDS
     # a clear excess is a violation
     res = _result(_small(0, 0.05), 1.5 * r, _small(2, 0.1))
     lp = _by_name(checks_from_result(res, **_certified()))["uncertainty_L2_norm"]
-    assert lp["status"] == VIOLATED and lp["confidence_low"] > RHO_L1
+    assert lp.status == VIOLATED and lp.confidence_low > RHO_L1
     # the mean gap against rho_L1 is the weaker (E|.| <= L_2p) comparison of the same sample
     mean = _by_name(checks_from_result(res, **_certified()))["uncertainty_gap"]
-    assert mean["empirical"] < lp["empirical"]
+    assert mean.empirical < lp.empirical
 
 
 def test_tail_frequency_clopper_pearson_with_bonferroni():
@@ -278,11 +278,11 @@ def test_tail_frequency_clopper_pearson_with_bonferroni():
     counts[7] = 0.3 * N_PATHS
     c = check_tail("t", counts, N_PATHS, KAPPA, DELTA_L1, LEVEL, times=TIMES)
     per_t = 1.0 - (1.0 - LEVEL) / N_TIMES
-    assert c["per_time_level"] == pytest.approx(per_t, abs=1e-15)
-    assert c["confidence_low"] == pytest.approx(
+    assert c.extra["per_time_level"] == pytest.approx(per_t, abs=1e-15)
+    assert c.confidence_low == pytest.approx(
         float(clopper_pearson_lower(counts[7], N_PATHS, per_t)), abs=1e-15
     )
-    assert c["time"] == TIMES[7] and c["status"] == VIOLATED
+    assert c.extra["time"] == TIMES[7] and c.status == VIOLATED
 
 
 def test_diverged_paths_make_a_hold_inconclusive_but_not_a_violation():
@@ -290,14 +290,14 @@ def test_diverged_paths_make_a_hold_inconclusive_but_not_a_violation():
     # 5% above rho among the valid ones; 10% of the paths diverged (unknown)
     x[: N_PATHS // 20] = 2.0
     c = check_radius("r", x, 1.0, 0.1, LEVEL, n_total=N_PATHS + N_PATHS // 10)
-    assert c["status"] == NOT_CHECKED and "inconclusive" in c["reason"]
+    assert c.status == NOT_CHECKED and "inconclusive" in c.reason
     x[: N_PATHS // 3] = 2.0
     c = check_radius("r", x, 1.0, 0.1, LEVEL, n_total=N_PATHS + N_PATHS // 10)
-    assert c["status"] == VIOLATED
+    assert c.status == VIOLATED
     # moments: a diverged path's contribution is unbounded, so no "holds"
     s1, s2 = np.full(N_TIMES, 0.01 * N_PATHS), np.full(N_TIMES, 0.001 * N_PATHS)
     c = check_mean("m", s1, s2, N_PATHS, 1.0, LEVEL, n_total=N_PATHS + 1, times=TIMES)
-    assert c["status"] == NOT_CHECKED and "inconclusive" in c["reason"]
+    assert c.status == NOT_CHECKED and "inconclusive" in c.reason
 
 
 # ---------------------------------------------------------------------------- end to end

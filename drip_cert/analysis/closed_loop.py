@@ -248,21 +248,22 @@ def closed_loop_constants(
     # sampled estimates
     fn = batch_fn(s, sp.Matrix(F))
     times = np.linspace(0.0, s.horizon, 5)
-    D, arg = growth_ratio_estimate(fn, s.n, 1.0, times)
-    L = holder_estimate(fn, s.n, 1.0, times)
-    if float(np.linalg.norm(arg)) >= SUPERLINEAR_RADIUS:
+    growth = growth_ratio_estimate(fn, s.n, 1.0, times)
+    lip = holder_estimate(fn, s.n, 1.0, times)
+    D, L = growth.value, lip.value
+    est = "sampled (spheres of radii up to 1e6): an estimate, not a bound"
+    est_D, est_L = est + growth.diagnostics(), est + lip.diagnostics()
+    if float(np.linalg.norm(growth.argmax)) >= SUPERLINEAR_RADIUS:
         # the ratio is largest at the outermost sampled radius: it grows without bound
         D, L = math.inf, math.inf
-    F0 = max(float(np.linalg.norm(fn(float(t), np.zeros((1, s.n)))[0])) for t in times)
-    est = "sampled (spheres of radii up to 1e6): an estimate, not a bound"
-    if math.isinf(D):
-        est = (
+        est_D = est_L = (
             "the sampled ratio ||F(a)|| / sqrt(1 + ||a||^2) still grows at ||a|| = 1e6: "
             "super-linear growth, L1-DRAC Assumption 1 fails"
         )
+    F0 = max(float(np.linalg.norm(fn(float(t), np.zeros((1, s.n)))[0])) for t in times)
     return ClosedLoopConstants(
-        Quantity("Delta_f", D, How.ESTIMATE, src_f, est),
-        Quantity("L_f", L, How.ESTIMATE, src_l, est),
+        Quantity("Delta_f", D, How.ESTIMATE, src_f, est_D),
+        Quantity("L_f", L, How.ESTIMATE, src_l, est_L),
         Quantity(
             "Delta_star",
             r0 + F0 / lam.value,

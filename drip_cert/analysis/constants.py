@@ -130,7 +130,7 @@ def _sigma_min_down(lo: np.ndarray, hi: np.ndarray) -> float:
     ``sqrt(lambda_min(M^T M))``, ``M^T M`` enclosed by interval products and
     ``lambda_min(S) = -lambda_max(-S) >= -mu2_upper(-S)``."""
     from drip_cert.analysis.lognorm import mu2_interval_upper
-    from drip_cert.numerics.interval import _add, _mul
+    from drip_cert.numerics.interval import interval_add, interval_mul
     from drip_cert.numerics.rounding import sqrt_down
 
     n, m = lo.shape
@@ -140,7 +140,7 @@ def _sigma_min_down(lo: np.ndarray, hi: np.ndarray) -> float:
         for b in range(m):
             acc = (0.0, 0.0)
             for k in range(n):
-                acc = _add(acc, _mul((lo[k, a], hi[k, a]), (lo[k, b], hi[k, b])))
+                acc = interval_add(acc, interval_mul((lo[k, a], hi[k, a]), (lo[k, b], hi[k, b])))
             Glo[a, b], Ghi[a, b] = acc
     lam_min = -float(mu2_interval_upper(-Ghi, -Glo))
     return sqrt_down(lam_min) if lam_min > 0 else 0.0

@@ -23,7 +23,6 @@ the box; the result's ``region`` says so.
 
 from __future__ import annotations
 
-import heapq
 import math
 import time
 from collections.abc import Callable, Sequence
@@ -36,6 +35,7 @@ from scipy.optimize import minimize
 
 from drip_cert.analysis.lognorm import mu2_constant_bounds, mu2_interval_upper, mu_2
 from drip_cert.errors import SolverError, SpecError
+from drip_cert.numerics.bnb import maximize
 from drip_cert.numerics.interval import (
     EncloseCallback,
     MatrixEnclosure,
@@ -335,60 +335,6 @@ def sampled_max_mu2(
     return best, arg
 
 
-# --------------------------------------------------------------------------------------------
-# branch and bound
-# --------------------------------------------------------------------------------------------
-
-
-def _bnb(
-    menc: MatrixEnclosure,
-    full_box: np.ndarray,
-    point_mu: Callable[[np.ndarray], float],
-    active: np.ndarray,
-    lb0: float,
-    arg0: np.ndarray,
-    tol: float,
-    max_boxes: int,
-    max_time_s: float,
-) -> tuple[float, float, np.ndarray, int]:
-    """Branch and bound on ``max mu_2``; returns ``(upper, lower, argmax, n_boxes)``."""
-    scale = np.ptp(full_box, axis=1)
-    scale = np.where(scale > 0, scale, 1.0)
-    scale = np.where(active, scale, np.inf)  # never split a variable J does not depend on
-
-    def upper(b: np.ndarray) -> float:
-        lo, hi = menc(b)
-        return mu2_interval_upper(lo, hi)
-
-    lb, arg = lb0, arg0
-    counter = 0
-    heap = [(-upper(full_box), counter, full_box)]
-    n_boxes = 1
-    deadline = time.perf_counter() + max_time_s
-    while True:
-        ub = -heap[0][0]
-        if ub - lb <= tol or n_boxes >= max_boxes or time.perf_counter() > deadline:
-            break
-        _, _, b = heapq.heappop(heap)
-        widths = np.ptp(b, axis=1) / scale
-        k = int(np.argmax(widths))
-        if widths[k] == 0.0:  # a point box: cannot split further
-            heapq.heappush(heap, (-ub, counter, b))
-            break
-        mid = 0.5 * (b[k, 0] + b[k, 1])
-        for half in ((b[k, 0], mid), (mid, b[k, 1])):
-            c = b.copy()
-            c[k] = half
-            counter += 1
-            n_boxes += 1
-            heapq.heappush(heap, (-upper(c), counter, c))
-            centre = 0.5 * (c[:, 0] + c[:, 1])
-            v = point_mu(centre)
-            if v > lb:
-                lb, arg = v, centre
-    return -heap[0][0], lb, arg, n_boxes
-
-
 def contraction_rate(
     J: sp.Matrix,
     states: Sequence[sp.Symbol],
@@ -455,17 +401,16 @@ def contraction_rate(
         except (TypeError, ValueError) as exc:
             raise SpecError(f"J is constant but not real-valued: {J}", field="J") from exc
         mid = float(lo_mu)
-        return ContractionResult(
-            rate=-ub,
-            how=How.EXACT,
-            method="exact-linear",
-            scope=GLOBAL,
-            max_mu_upper=ub,
-            max_mu_sampled=mid,
+        return _result(
+            t0,
+            How.EXACT,
+            "exact-linear",
+            GLOBAL,
+            upper=ub,
+            sampled=mid,
             witness=None,
             tolerance=0.0,
             n_boxes=0,
-            time_s=time.perf_counter() - t0,
             note="constant Jacobian (linear or affine closed loop): mu_2 = lambda_max(sym J) "
             "isolated exactly (rational characteristic polynomial, roots in Arb); the rate is "
             "the rigorous lower end",
@@ -526,17 +471,16 @@ def contraction_rate(
         return float(mu_2(0.5 * (lo + hi)))
 
     if menc is None:
-        return ContractionResult(
-            rate=-lb,
-            how=How.ESTIMATE,
-            method="sampled",
-            scope=scope,
-            max_mu_upper=math.nan,
-            max_mu_sampled=lb,
-            witness=tuple(float(v) for v in arg),
+        return _result(
+            t0,
+            How.ESTIMATE,
+            "sampled",
+            scope,
+            upper=math.nan,
+            sampled=lb,
+            witness=arg,
             tolerance=tol,
             n_boxes=0,
-            time_s=time.perf_counter() - t0,
             note=(
                 "sampled estimate (grid + random + local search), NOT a bound"
                 + (f"; no sound enclosure: {reason}" if reason else "")
@@ -544,11 +488,25 @@ def contraction_rate(
         )
     if not math.isfinite(lb):
         lb = point_mu(arg)
-    active = np.array([J.has(v) for v in variables])
-    ub, lb, arg, n_boxes = _bnb(menc, full, point_mu, active, lb, arg, tol, max_boxes, max_time_s)
+
+    def upper(b: np.ndarray) -> float:
+        lo, hi = menc(b)
+        return mu2_interval_upper(lo, hi)
+
+    res = maximize(
+        full,
+        upper,
+        point_mu,
+        atol=tol,
+        max_boxes=max_boxes,
+        max_time_s=max_time_s,
+        active=[J.has(v) for v in variables],
+        initial=(lb, arg),
+    )
+    ub, lb, arg, n_boxes = res.upper, res.lower, res.argmax, res.n_boxes
     if lb > ub + 1e-9 * (1.0 + abs(ub)):
         raise SolverError(
-            f"a sampled mu_2 = {lb:.17g} at {arg.tolist()} exceeds the sound bound {ub:.17g}: "
+            f"a sampled mu_2 = {lb:.17g} at {list(arg)} exceeds the sound bound {ub:.17g}: "
             "J_num does not evaluate the same Jacobian as J (or an enclose callback is unsound)"
         )
     gap = ub - lb
@@ -559,15 +517,44 @@ def contraction_rate(
     )
     if depends_x:
         note += "; holds only on the box (the paper asks for all x)"
-    return ContractionResult(
-        rate=-ub,
-        how=How.SOUND,
-        method="interval-bnb",
-        scope=scope,
-        max_mu_upper=ub,
-        max_mu_sampled=lb,
-        witness=tuple(float(v) for v in arg),
+    return _result(
+        t0,
+        How.SOUND,
+        "interval-bnb",
+        scope,
+        upper=ub,
+        sampled=lb,
+        witness=arg,
         tolerance=tol,
+        n_boxes=n_boxes,
+        note=note,
+    )
+
+
+def _result(
+    t0: float,
+    how: How,
+    method: str,
+    scope: Scope,
+    *,
+    upper: float,
+    sampled: float,
+    witness: Sequence[float] | None,
+    tolerance: float,
+    n_boxes: int,
+    note: str,
+) -> ContractionResult:
+    """The result of a method started at ``t0``: the rate is ``-upper`` for a bound (exact or
+    sound) and ``-sampled`` for an estimate."""
+    return ContractionResult(
+        rate=-sampled if how is How.ESTIMATE else -upper,
+        how=how,
+        method=method,
+        scope=scope,
+        max_mu_upper=upper,
+        max_mu_sampled=sampled,
+        witness=None if witness is None else tuple(float(v) for v in witness),
+        tolerance=tolerance,
         n_boxes=n_boxes,
         time_s=time.perf_counter() - t0,
         note=note,

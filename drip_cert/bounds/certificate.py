@@ -14,7 +14,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -29,9 +29,14 @@ from drip_cert.analysis.invariance import InvariantSet, best_invariant_set
 from drip_cert.errors import AssumptionViolation, DripCertError
 from drip_cert.model.system import System
 from drip_cert.numerics.rounding import div_up, mul_up, up
+from drip_cert.progress import Stages
 from drip_cert.provenance import Check, How, Quantity, Scope, Verdict, json_float, verdict_of
 from drip_cert.spec.load import Spec
 from drip_cert.spec.settings import ContractionSettings
+
+if TYPE_CHECKING:
+    from drip_cert.learn.imitation import DemonstrationSet
+    from drip_cert.model.mlp import MLP
 
 
 @dataclass(frozen=True)
@@ -68,6 +73,8 @@ def analyse_contraction(s: System, which: str, opts: ContractionSettings) -> Con
     depends_t = J.has(s.t)
     t_range = (0.0, s.horizon) if depends_t else None
     jac = s.numeric.jac_expert if which == "expert" else s.numeric.jac_learned
+    if jac is None:
+        raise DripCertError(f"the {which} closed loop has no Jacobian (no {which} policy)")
     jv = jax.jit(jax.vmap(jac, in_axes=(0, 0)))
 
     def J_num(tt, X):
@@ -129,7 +136,7 @@ class Certificate:
     contraction_expert: ContractionAnalysis
     contraction_learned: ContractionAnalysis | None
     delta_iss: Any | None  # drip_cert.analysis.iss.DeltaISSResult
-    l1: Any | None = None  # drip_cert.bounds.l1_system.L1Section
+    l1: Any | None = None  # drip_cert.bounds.l1drac.system.L1Section
     tasil: Any | None = None  # drip_cert.bounds.tasil.TasilCertificate
     tasil_provenance: Mapping[str, Any] = field(default_factory=dict)
     notes: tuple[str, ...] = ()
@@ -321,21 +328,43 @@ def _invariance(s: System, r: Any) -> InvariantSet | None:
     )
 
 
-def certify(spec: Spec, *, tasil: Any | None = None) -> Certificate:
-    """Run the certificate pipeline on ``spec``.
+def certify(
+    spec: Spec | System,
+    *,
+    demonstrations: DemonstrationSet | None = None,
+    policy: MLP | None = None,
+    progress: bool = False,
+) -> Certificate:
+    """The DRIP certificate of a system: assembles the constants, rates, gains and bounds.
 
     Parameters
     ----------
     spec
-        The loaded specification.
-    tasil
-        A precomputed TaSIL certificate to include (from :mod:`drip_cert.bounds.tasil`), or
-        ``None``.
+        A loaded :class:`~drip_cert.spec.load.Spec`, or a bare
+        :class:`~drip_cert.model.system.System` (default settings; no ``[l1drac]`` part, and a
+        TaSIL part only when ``demonstrations`` are given).
+    demonstrations
+        The expert demonstrations the learned policy was trained on
+        (:func:`~drip_cert.learn.imitation.demonstration_set`); the TaSIL bound is computed on
+        them. ``None``: they are drawn from the spec's ``[tasil]`` settings (seed, trajectories,
+        samples), the same draw ``drip-cert train`` makes with those settings.
+    policy
+        An MLP to use as the learned policy ``pi_IL`` (replaces the spec's).
+    progress
+        Report each stage and its duration on stderr.
     """
+    if isinstance(spec, System):
+        spec = Spec(None, spec)
+    if policy is not None:
+        from drip_cert.learn.imitation import learned_system
+
+        spec = spec.with_system(learned_system(spec.system, policy))
+    stage = Stages("certify", enabled=progress)
     s = spec.system
     settings = spec.settings
     opts = settings.contraction  # validated at load (its region contains the support)
     given = settings.constants
+    stage("input and uncertainty constants (growth, Lipschitz, Hoelder bounds)")
     ic = input_constants(s)
     uc = uncertainty_constants(s, given)
     notes: list[str] = []
@@ -365,8 +394,10 @@ def certify(spec: Spec, *, tasil: Any | None = None) -> Certificate:
         )
     )
 
+    stage("contraction rate of the expert closed loop")
     ce = analyse_contraction(s, "expert", opts)
     r = ce.euclidean
+    stage("forward-invariant set (where the expert's rate is used)")
     inv = _invariance(s, r)
     a2 = _rate_check("DRIP-A2", r, "expert closed loop", "DRIP Assumption 2")
     checks.append(a2.with_scope(*_expert_scope(r, inv, s.horizon)))
@@ -374,6 +405,7 @@ def certify(spec: Spec, *, tasil: Any | None = None) -> Certificate:
 
     cl = None
     if s.learned is not None:
+        stage("contraction rate of the learned closed loop")
         cl = analyse_contraction(s, "learned", opts)
         rl = cl.euclidean
         a2l = _rate_check(
@@ -437,18 +469,16 @@ def certify(spec: Spec, *, tasil: Any | None = None) -> Certificate:
         notes.append("no delta-ISS gain: the expert closed loop is not shown to contract")
 
     tasil_prov: dict[str, Any] = {}
-    if (
-        tasil is None
-        and s.learned is not None
-        and "tasil" in settings.present
-        and gamma0 is not None
-    ):
-        from drip_cert.bounds.tasil_section import tasil_section
-        from drip_cert.learn.imitation import demonstrations
+    tasil = None
+    wants_tasil = "tasil" in settings.present or demonstrations is not None
+    if s.learned is not None and wants_tasil and gamma0 is not None:
+        from drip_cert.bounds.tasil.section import tasil_section
+        from drip_cert.learn.imitation import demonstration_set
 
         st = settings.tasil
-        train = demonstrations(s, st.trajectories, st.samples, st.seed, 0)
-        held = demonstrations(s, st.heldout, st.samples, st.seed, 1) if st.heldout else None
+        stage("TaSIL section (demonstrations, h0 and h1 along them, the bound)")
+        demos = demonstration_set(s, st) if demonstrations is None else demonstrations
+        train, held = demos.train, demos.heldout
         room = math.inf if inv is None else (inv.room if inv.proved else math.inf)
         tasil, tasil_prov, tq = tasil_section(
             s,
@@ -479,8 +509,9 @@ def certify(spec: Spec, *, tasil: Any | None = None) -> Certificate:
         checks.append(tcheck.with_scope(*_tasil_scope(r, inv, tasil, s.horizon)))
     l1 = None
     if wants_l1:
-        from drip_cert.bounds.l1_system import l1_section
+        from drip_cert.bounds.l1drac.system import l1_section
 
+        stage("L1-DRAC constants, design and its verification in Arb")
         lam_q = src.euclidean.to_quantity()
         est = -src.euclidean.max_mu_sampled
         if lam_q.value <= 0 < est:
@@ -534,6 +565,7 @@ def certify(spec: Spec, *, tasil: Any | None = None) -> Certificate:
             source="L1-DRAC (16), (21), (24)",
         )
         checks.append(dcheck.with_scope(*_sde_scope(dcheck.scope, s.horizon)))
+    stage.done()
     return Certificate(
         system=s,
         assumptions=tuple(checks),
@@ -588,6 +620,14 @@ def _tasil_scope(r: Any, inv: InvariantSet | None, tasil: Any, horizon: float) -
         return ok, why + "; the learned trajectories are not shown to stay in the box"
     if r.scope.all_x:
         return True, "the expert rate holds for all x; L_Delta on the tube of radius R"
+    assert inv is not None  # _expert_scope accepts a box rate only with a proved invariant set
+    if not tasil.R < inv.room:
+        return False, (
+            f"{inv.reason}; it leaves no room inside the region where the rate is proved "
+            f"(room {inv.room:.6g}), so the lemma's tube of radius R = {tasil.R:.6g} does not keep "
+            "the learned trajectories there: enlarge [contraction] region, or prove the rate for "
+            "all x"
+        )
     return True, (
         f"{inv.reason}; the lemma's tube radius R = {tasil.R:.6g} is below that room, so the "
         "learned trajectories stay in the box (first-exit argument)"

@@ -66,35 +66,68 @@ def learned_system(s: System, mlp: MLP, name: str = POLICY_BLOCK, source: str = 
 
 
 @dataclass(frozen=True)
-class TrainedPolicy:
-    """A trained policy with its data, for the certificate and the reports."""
+class DemonstrationSet:
+    """The training and held-out expert demonstrations of one seed (independent streams 0, 1).
 
-    system: System  #: the system with pi_IL set to the trained policy
-    mlp: MLP
-    result: Any  #: drip_cert.learn.tasil.TrainResult
+    The pipeline draws them once and hands the same set to training and to the certificate, so
+    the TaSIL bound is computed on the data the policy was trained on.
+    """
+
     train: Demonstrations
     heldout: Demonstrations | None
-    settings: TasilSettings
+    seed: int
 
 
-def train_on_system(
-    s: System, settings: TasilSettings, method: str | None = None, progress: bool = False
-) -> TrainedPolicy:
-    """Generate demonstrations, train TaSIL (or BC) and attach the policy to ``s``.
-
-    Training and held-out demonstrations use independent streams of ``settings.seed``.
-    """
-    from drip_cert.learn.tasil import train_policy
-
-    method = method or settings.method
+def demonstration_set(s: System, settings: TasilSettings) -> DemonstrationSet:
+    """``settings.trajectories`` training and ``settings.heldout`` held-out trajectories of
+    ``settings.samples`` intervals, from ``settings.seed``."""
     train = demonstrations(s, settings.trajectories, settings.samples, settings.seed, 0)
     heldout = (
         demonstrations(s, settings.heldout, settings.samples, settings.seed, 1)
         if settings.heldout > 0
         else None
     )
+    return DemonstrationSet(train, heldout, settings.seed)
+
+
+@dataclass(frozen=True)
+class TrainedPolicy:
+    """A trained policy with the data it was trained on."""
+
+    system: System  #: the system with pi_IL set to the trained policy
+    mlp: MLP
+    result: Any  #: drip_cert.learn.tasil.TrainResult
+    demonstrations: DemonstrationSet
+    settings: TasilSettings
+    method: str
+
+    @property
+    def train(self) -> Demonstrations:
+        return self.demonstrations.train
+
+    @property
+    def heldout(self) -> Demonstrations | None:
+        return self.demonstrations.heldout
+
+
+def train_on_system(
+    s: System,
+    settings: TasilSettings,
+    method: str | None = None,
+    progress: bool = False,
+    demonstrations: DemonstrationSet | None = None,
+) -> TrainedPolicy:
+    """Train TaSIL (or BC, ``method``) on expert demonstrations and attach the policy to ``s``.
+
+    ``demonstrations`` are drawn by :func:`demonstration_set` from ``settings`` when not given;
+    training uses ``settings.seed`` for its own randomness (initialisation, batches).
+    """
+    from drip_cert.learn.tasil import train_policy
+
+    method = method or settings.method
+    demos = demonstration_set(s, settings) if demonstrations is None else demonstrations
     res = train_policy(
-        train,
+        demos.train,
         s.numeric.expert,
         method=method,
         order=settings.order,
@@ -106,4 +139,4 @@ def train_on_system(
         batch=settings.batch,
         progress=progress,
     )
-    return TrainedPolicy(learned_system(s, res.mlp), res.mlp, res, train, heldout, settings)
+    return TrainedPolicy(learned_system(s, res.mlp), res.mlp, res, demos, settings, method)

@@ -19,7 +19,7 @@ from __future__ import annotations
 import sys
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 from functools import partial
 
 import numpy as np
@@ -409,13 +409,6 @@ def _split(n_traj: int, val_fraction: float, rng: np.random.Generator):
 def _take_axis(targets: Targets, idx, axis: int) -> Targets:
     arrays = (targets.states, targets.actions, targets.jac, targets.hess)
     return Targets(*(None if a is None else jnp.take(a, idx, axis=axis) for a in arrays))
-
-
-def settings_dict(settings: TrainSettings) -> dict:
-    """JSON-ready dictionary of ``settings`` (for reports)."""
-    out = asdict(settings)
-    out["hidden"] = list(settings.hidden)
-    return out
 
 
 def evaluate_gap(

@@ -1,11 +1,16 @@
-"""The simulation model: jax-traceable vector fields and policies of the DRIP paper.
+"""The numeric view of a system: jax-traceable vector fields, policies and closed-loop Jacobians.
 
-A :class:`SimModel` is the engine's only view of a system. It holds the known drift ``f`` (without
-any policy), the input operator ``g``, the known diffusion ``p``, the unknown drift and diffusion
-``Lambda_mu``/``Lambda_sigma`` of Definition "Vector Fields" of the DRIP paper (eq.
-``TrueVectorFields``; L1-DRAC eq. (1)), the expert and learned policies and ``Theta_ad`` of L1-DRAC
-Assumption 1. Every callable takes ONE path (unbatched arrays) and must be traceable by jax; the
-engine vmaps them. The lead's ``System`` produces a ``SimModel``; nothing here depends on it.
+A :class:`SimModel` is the ONE numeric view of a system, used by the analysis, the learning and the
+Monte-Carlo engine alike. It holds the known drift ``f`` (without any policy), the input operator
+``g``, the known diffusion ``p``, the unknown drift and diffusion ``Lambda_mu``/``Lambda_sigma`` of
+Definition "Vector Fields" of the DRIP paper (eq. ``TrueVectorFields``; L1-DRAC eq. (1)), the
+expert and learned policies, the closed-loop Jacobians of DRIP Assumption 2 and ``Theta_ad`` of
+L1-DRAC Assumption 1. Every callable takes ONE path (unbatched arrays) and must be traceable by jax;
+the engine vmaps them.
+
+:attr:`drip_cert.model.system.System.numeric` lowers a ``System``'s expressions into one (built once
+per system); :func:`make_model` builds one from plain jax functions. Nothing here imports the
+``System``: the view takes callables.
 """
 
 from __future__ import annotations
@@ -18,10 +23,10 @@ import numpy as np
 from drip_cert._jax import jax, jnp
 from drip_cert.errors import SpecError
 
-__all__ = ["SimModel", "make_model", "theta_ad_from_g"]
+__all__ = ["SimModel", "closed_loop_jacobian", "make_model", "theta_ad_from_g"]
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class SimModel:
     """Sizes and jax-traceable callables of one system (single path, unbatched).
 
@@ -36,9 +41,9 @@ class SimModel:
     p
         ``p(t, x) -> (n, d)``: known diffusion (may be identically zero).
     lam_mu
-        ``Lambda_mu(t, x) -> (n,)``: unknown drift (DRIP / L1-DRAC (1)).
+        ``Lambda_mu(t, x) -> (n,)``: unknown drift (DRIP / L1-DRAC (1)); zero when unknown.
     lam_sigma
-        ``Lambda_sigma(t, x) -> (n, d)``: unknown diffusion.
+        ``Lambda_sigma(t, x) -> (n, d)``: unknown diffusion; zero when unknown.
     expert
         ``pi*(x) -> (m,)``: the expert policy of (NominalProcesses).
     learned
@@ -47,6 +52,14 @@ class SimModel:
         ``Theta_ad(t) -> (m, n)``, ``[I_m 0] gbar(t)^{-1}`` of L1-DRAC Assumption 1.
     name
         Free text; part of the resume hash of a Monte-Carlo run.
+    jac_expert, jac_learned
+        ``(t, x) -> (n, n)``: ``nabla_x fbar(t, x, pi(x))`` of the expert and of the learned closed
+        loop (DRIP Assumption 2). ``None`` (the default) takes them by forward-mode autodiff
+        (:func:`closed_loop_jacobian`); ``jac_learned`` stays ``None`` without a learned policy.
+
+    Notes
+    -----
+    Equality is identity (``eq=False``): callables have no value equality.
     """
 
     n: int
@@ -61,6 +74,8 @@ class SimModel:
     learned: Callable | None
     theta_ad: Callable
     name: str = "model"
+    jac_expert: Callable | None = None
+    jac_learned: Callable | None = None
 
     def __post_init__(self) -> None:
         for fld in ("n", "m", "d"):
@@ -77,8 +92,22 @@ class SimModel:
         for fld in ("f", "g", "p", "lam_mu", "lam_sigma", "expert", "theta_ad"):
             if not callable(getattr(self, fld)):
                 raise SpecError("must be a callable", field=f"SimModel.{fld}")
-        if self.learned is not None and not callable(self.learned):
-            raise SpecError("must be a callable or None", field="SimModel.learned")
+        for fld in ("learned", "jac_expert", "jac_learned"):
+            if getattr(self, fld) is not None and not callable(getattr(self, fld)):
+                raise SpecError("must be a callable or None", field=f"SimModel.{fld}")
+        if self.learned is None and self.jac_learned is not None:
+            raise SpecError(
+                "a closed-loop Jacobian of the learned policy without a learned policy",
+                field="SimModel.jac_learned",
+            )
+        if self.jac_expert is None:
+            object.__setattr__(
+                self, "jac_expert", closed_loop_jacobian(self.f, self.g, self.expert)
+            )
+        if self.learned is not None and self.jac_learned is None:
+            object.__setattr__(
+                self, "jac_learned", closed_loop_jacobian(self.f, self.g, self.learned)
+            )
         self._check_shapes()
 
     def _check_shapes(self) -> None:
@@ -97,6 +126,8 @@ class SimModel:
         }
         if self.learned is not None:
             expected["learned"] = ((x,), (m,))
+            expected["jac_learned"] = ((t, x), (n, n))
+        expected["jac_expert"] = ((t, x), (n, n))
         for fld, (args, shape) in expected.items():
             try:
                 out = jax.eval_shape(getattr(self, fld), *args)
@@ -112,6 +143,19 @@ class SimModel:
                     f"returns shape {got}, expected {shape} for n={n}, m={m}, d={d}",
                     field=f"SimModel.{fld}",
                 )
+
+
+def closed_loop_jacobian(f: Callable, g: Callable, policy: Callable) -> Callable:
+    """``(t, x) -> nabla_x fbar(t, x, pi(x))``, ``fbar = f(t, x) + g(t) pi(x)`` (DRIP Assumption 2).
+
+    Forward-mode autodiff of the closed loop; :attr:`~drip_cert.model.system.System.numeric`
+    passes the exact symbolic Jacobian instead.
+    """
+
+    def jac(t, x):
+        return jax.jacfwd(lambda z: f(t, z) + g(t) @ policy(z))(x)
+
+    return jac
 
 
 def theta_ad_from_g(g: Callable) -> Callable:

@@ -18,7 +18,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from functools import cached_property
 from types import MappingProxyType
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import sympy as sp
@@ -26,6 +26,9 @@ import sympy as sp
 from drip_cert.errors import SpecError
 from drip_cert.model.blocks import Block, block_applications
 from drip_cert.model.lower import lower
+
+if TYPE_CHECKING:
+    from drip_cert.model.numeric import SimModel
 
 RANK_TOL = 1e-10  #: relative singular-value threshold for the full-column-rank check of g
 
@@ -305,28 +308,47 @@ class System:
         return sp.ImmutableMatrix(sp.eye(self.n) - g * sp.Matrix(self.theta_ad))
 
     @cached_property
-    def numeric(self) -> NumericSystem:
-        """jax callables of every part of the system (built once, lazily)."""
-        return NumericSystem.build(self)
+    def numeric(self) -> SimModel:
+        """The numeric view of this system: jax callables of every part (built once, lazily).
 
-    def sim_model(self):
-        """The :class:`~drip_cert.model.numeric.SimModel` of this system (the engine's view)."""
+        Lowers ``f``, ``g``, ``p``, the uncertainties (zero when not given), both policies, the
+        closed-loop Jacobians of DRIP Assumption 2 and ``Theta_ad`` into one
+        :class:`~drip_cert.model.numeric.SimModel`, the view the analysis and the Monte-Carlo
+        engine share.
+        """
+        from drip_cert._jax import jnp
         from drip_cert.model.numeric import SimModel
 
-        num = self.numeric
+        n, d = self.n, self.d
+        g_fn = self.lower(self.g)
+        exp_fn = self.lower(list(self.expert))
+        th = self.lower(self.theta_ad)
+        learned = None if self.learned is None else self.lower(list(self.learned))
         return SimModel(
-            n=self.n,
+            n=n,
             m=self.m,
-            d=self.d,
-            f=num.f,
-            g=num.g,
-            p=num.p,
-            lam_mu=num.lam_mu,
-            lam_sigma=num.lam_sigma,
-            expert=num.expert,
-            learned=num.learned,
-            theta_ad=num.theta_ad,
+            d=d,
+            f=self.lower(list(self.f)),
+            g=lambda t: g_fn(t, jnp.zeros(n)),
+            p=self.lower(self.diffusion),
+            lam_mu=(
+                self.lower(list(self.lambda_mu))
+                if self.lambda_mu is not None
+                else (lambda t, x: jnp.zeros(n))
+            ),
+            lam_sigma=(
+                self.lower(self.lambda_sigma)
+                if self.lambda_sigma is not None
+                else (lambda t, x: jnp.zeros((n, d)))
+            ),
+            expert=lambda x: exp_fn(0.0, x),
+            learned=None if learned is None else (lambda x: learned(0.0, x)),
+            theta_ad=lambda t: th(t, jnp.zeros(n)),
             name=self.name,
+            jac_expert=self.lower(self.closed_loop_jacobian("expert")),
+            jac_learned=(
+                None if self.learned is None else self.lower(self.closed_loop_jacobian("learned"))
+            ),
         )
 
     def with_learned(
@@ -410,61 +432,3 @@ def _box(value: Any, n: int, fieldname: str) -> tuple[tuple[float, float], ...]:
             raise SpecError(f"interval {i} is empty: lo = {lo} > hi = {hi}", field=fieldname)
         out.append((float(lo), float(hi)))
     return tuple(out)
-
-
-@dataclass(frozen=True, eq=False)
-class NumericSystem:
-    """jax-traceable callables of a :class:`System` (single path, unbatched).
-
-    ``f(t, x) -> (n,)``, ``g(t) -> (n, m)``, ``p(t, x) -> (n, d)``,
-    ``lam_mu(t, x) -> (n,)`` (zero when unknown), ``lam_sigma(t, x) -> (n, d)``,
-    ``expert(x) -> (m,)``, ``learned(x) -> (m,)`` or ``None``,
-    ``jac_expert(t, x)`` / ``jac_learned(t, x) -> (n, n)`` closed-loop Jacobians,
-    ``theta_ad(t) -> (m, n)``.
-    """
-
-    f: Any
-    g: Any
-    p: Any
-    lam_mu: Any
-    lam_sigma: Any
-    expert: Any
-    learned: Any
-    jac_expert: Any
-    jac_learned: Any
-    theta_ad: Any
-
-    @staticmethod
-    def build(s: System) -> NumericSystem:
-        from drip_cert._jax import jnp
-
-        n, d = s.n, s.d
-        f = s.lower(list(s.f))
-        g_fn = s.lower(s.g)
-        p = s.lower(s.diffusion)
-        lam_mu = (
-            s.lower(list(s.lambda_mu)) if s.lambda_mu is not None else (lambda t, x: jnp.zeros(n))
-        )
-        lam_sigma = (
-            s.lower(s.lambda_sigma)
-            if s.lambda_sigma is not None
-            else (lambda t, x: jnp.zeros((n, d)))
-        )
-        exp_fn = s.lower(list(s.expert))
-        learned = None if s.learned is None else s.lower(list(s.learned))
-        jac_e = s.lower(s.closed_loop_jacobian("expert"))
-        jac_l = None if s.learned is None else s.lower(s.closed_loop_jacobian("learned"))
-
-        th = s.lower(s.theta_ad)
-        return NumericSystem(
-            f=f,
-            g=lambda t: g_fn(t, jnp.zeros(n)),
-            p=p,
-            lam_mu=lam_mu,
-            lam_sigma=lam_sigma,
-            expert=lambda x: exp_fn(0.0, x),
-            learned=None if learned is None else (lambda x: learned(0.0, x)),
-            jac_expert=jac_e,
-            jac_learned=jac_l,
-            theta_ad=lambda t: th(t, jnp.zeros(n)),
-        )

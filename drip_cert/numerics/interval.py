@@ -54,7 +54,8 @@ __all__ = [
     "compile_enclosure",
     "enclose_expr",
     "MatrixEnclosure",
-    "width",
+    "interval_add",
+    "interval_mul",
 ]
 
 Interval = tuple[float, float]
@@ -78,17 +79,10 @@ class UnsupportedExpression(DripCertError, NotImplementedError):
 
 _dn = enclose_down
 _up = enclose_up
-_arb_lo = arb_lo
-_arb_hi = arb_hi
 
 
 def _exact(x: float) -> arb:
     return arb(x)
-
-
-def width(iv: Interval) -> float:
-    """Width ``hi - lo`` of an interval (rounded up)."""
-    return _up(iv[1] - iv[0])
 
 
 # --------------------------------------------------------------------------------------------
@@ -96,12 +90,9 @@ def width(iv: Interval) -> float:
 # --------------------------------------------------------------------------------------------
 
 
-def _add(a: Interval, b: Interval) -> Interval:
+def interval_add(a: Interval, b: Interval) -> Interval:
+    """Rigorous ``a + b`` of two intervals (ends rounded outward)."""
     return (_dn(a[0] + b[0]), _up(a[1] + b[1]))
-
-
-def _neg(a: Interval) -> Interval:
-    return (-a[1], -a[0])
 
 
 def _prod(x: float, y: float) -> float:
@@ -109,7 +100,8 @@ def _prod(x: float, y: float) -> float:
     return 0.0 if p != p else p  # 0 * inf = 0 in interval arithmetic
 
 
-def _mul(a: Interval, b: Interval) -> Interval:
+def interval_mul(a: Interval, b: Interval) -> Interval:
+    """Rigorous ``a * b`` of two intervals (``0 * inf = 0``; ends rounded outward)."""
     ps = (_prod(a[0], b[0]), _prod(a[0], b[1]), _prod(a[1], b[0]), _prod(a[1], b[1]))
     return (_dn(min(ps)), _up(max(ps)))
 
@@ -130,14 +122,14 @@ def _ipow(a: Interval, k: int) -> Interval:
         return a
     lo, hi = a
     if k % 2 == 1:  # odd: increasing
-        return (_arb_lo(_exact(lo) ** k), _arb_hi(_exact(hi) ** k))
+        return (arb_lo(_exact(lo) ** k), arb_hi(_exact(hi) ** k))
     # even power: decreasing on (-inf, 0], increasing on [0, inf)
     if lo >= 0.0:
-        return (_arb_lo(_exact(lo) ** k), _arb_hi(_exact(hi) ** k))
+        return (arb_lo(_exact(lo) ** k), arb_hi(_exact(hi) ** k))
     if hi <= 0.0:
-        return (_arb_lo(_exact(hi) ** k), _arb_hi(_exact(lo) ** k))
+        return (arb_lo(_exact(hi) ** k), arb_hi(_exact(lo) ** k))
     m = max(-lo, hi)
-    return (0.0, _arb_hi(_exact(m) ** k))
+    return (0.0, arb_hi(_exact(m) ** k))
 
 
 def _monotone(name: str, lo_domain: float | None = None, strict: bool = False):
@@ -150,8 +142,8 @@ def _monotone(name: str, lo_domain: float | None = None, strict: bool = False):
                 f"{_name} is evaluated on [{lo}, {hi}], which leaves its real domain "
                 f"({'>' if strict else '>='} {lo_domain}); shrink the box or rewrite the expression"
             )
-        vlo = -_INF if lo == -_INF else _arb_lo(getattr(_exact(lo), _name)())
-        vhi = _INF if hi == _INF else _arb_hi(getattr(_exact(hi), _name)())
+        vlo = -_INF if lo == -_INF else arb_lo(getattr(_exact(lo), _name)())
+        vhi = _INF if hi == _INF else arb_hi(getattr(_exact(hi), _name)())
         return (vlo, vhi)
 
     return op
@@ -161,7 +153,7 @@ _exp = _monotone("exp")
 _log = _monotone("log", 0.0, strict=True)
 _sqrt = _monotone("sqrt", 0.0)
 _tanh_raw = _monotone("tanh")
-_atan_raw = _monotone("atan")
+_atan = _monotone("atan")
 _sinh = _monotone("sinh")
 _asinh = _monotone("asinh")
 
@@ -172,10 +164,6 @@ def _clip(a: Interval, lo: float, hi: float) -> Interval:
 
 def _tanh(a: Interval) -> Interval:
     return _clip(_tanh_raw(a), -1.0, 1.0)
-
-
-def _atan(a: Interval) -> Interval:
-    return _atan_raw(a)
 
 
 _erf_raw = _monotone("erf")
@@ -189,8 +177,8 @@ def _erfc(a: Interval) -> Interval:
     """``erfc`` is decreasing, with values in ``(0, 2)``; no cancellation for large arguments
     (the reason to prefer ``erfc(-u)`` over ``1 + erf(u)``)."""
     lo, hi = a
-    vlo = 0.0 if hi == _INF else _arb_lo(_exact(hi).erfc())
-    vhi = 2.0 if lo == -_INF else _arb_hi(_exact(lo).erfc())
+    vlo = 0.0 if hi == _INF else arb_lo(_exact(hi).erfc())
+    vhi = 2.0 if lo == -_INF else arb_hi(_exact(lo).erfc())
     return _clip((vlo, vhi), 0.0, 2.0)
 
 
@@ -198,8 +186,8 @@ def _sech(a: Interval) -> Interval:
     """``sech`` is even and decreasing in ``|x|``, with values in ``(0, 1]``; ``sech(u)**2`` is the
     cancellation-free form of ``tanh'(u) = 1 - tanh(u)**2``."""
     m = _abs(a)
-    vlo = 0.0 if m[1] == _INF else _arb_lo(_exact(m[1]).sech())
-    vhi = _arb_hi(_exact(m[0]).sech())
+    vlo = 0.0 if m[1] == _INF else arb_lo(_exact(m[1]).sech())
+    vhi = arb_hi(_exact(m[0]).sech())
     return _clip((vlo, vhi), 0.0, 1.0)
 
 
@@ -207,7 +195,7 @@ def _contains_point(lo: float, hi: float, offset: arb, period: arb) -> bool:
     """Whether ``[lo, hi]`` may contain ``offset + k * period``, ``k`` integer (conservative)."""
     kl = (_exact(lo) - offset) / period
     kh = (_exact(hi) - offset) / period
-    return math.ceil(_arb_lo(kl)) <= math.floor(_arb_hi(kh))
+    return math.ceil(arb_lo(kl)) <= math.floor(arb_hi(kh))
 
 
 def _periodic(a: Interval, fn: str, max_at: arb, min_at: arb) -> Interval:
@@ -216,8 +204,8 @@ def _periodic(a: Interval, fn: str, max_at: arb, min_at: arb) -> Interval:
         return (-1.0, 1.0)
     vl = getattr(_exact(lo), fn)()
     vh = getattr(_exact(hi), fn)()
-    rlo = min(_arb_lo(vl), _arb_lo(vh))
-    rhi = max(_arb_hi(vl), _arb_hi(vh))
+    rlo = min(arb_lo(vl), arb_lo(vh))
+    rhi = max(arb_hi(vl), arb_hi(vh))
     if _contains_point(lo, hi, max_at, _TWO_PI):
         rhi = 1.0
     if _contains_point(lo, hi, min_at, _TWO_PI):
@@ -239,7 +227,7 @@ def _tan(a: Interval) -> Interval:
         return _ENTIRE
     if _contains_point(lo, hi, _HALF_PI, _PI):
         return _ENTIRE
-    return (_arb_lo(_exact(lo).tan()), _arb_hi(_exact(hi).tan()))
+    return (arb_lo(_exact(lo).tan()), arb_hi(_exact(hi).tan()))
 
 
 def _abs(a: Interval) -> Interval:
@@ -253,8 +241,8 @@ def _abs(a: Interval) -> Interval:
 
 def _cosh(a: Interval) -> Interval:
     m = _abs(a)
-    vlo = _arb_lo(_exact(m[0]).cosh())
-    vhi = _INF if m[1] == _INF else _arb_hi(_exact(m[1]).cosh())
+    vlo = arb_lo(_exact(m[0]).cosh())
+    vhi = _INF if m[1] == _INF else arb_hi(_exact(m[1]).cosh())
     return (max(vlo, 1.0), vhi)
 
 
@@ -296,9 +284,9 @@ def _rpow(a: Interval, r: sp.Rational) -> Interval:
         end = (_INF, _INF) if r > 0 else (0.0, 0.0)
     else:
         v = pw(hi)
-        end = (_arb_lo(v), _arb_hi(v))
+        end = (arb_lo(v), arb_hi(v))
     v0 = pw(lo)
-    start = (_arb_lo(v0), _arb_hi(v0))
+    start = (arb_lo(v0), arb_hi(v0))
     if r > 0:
         return (max(start[0], 0.0), end[1])
     return (max(end[0], 0.0), start[1])
@@ -344,12 +332,12 @@ def _const(value: sp.Expr) -> Interval:
         if math.isfinite(f) and Fraction(f) == Fraction(p, q):
             return (f, f)  # a float exactly (1/2, -3/4): no widening
         v = arb(p) / arb(q)
-        return (_arb_lo(v), _arb_hi(v))
+        return (arb_lo(v), arb_hi(v))
     if value is sp.pi:
-        return (_arb_lo(_PI), _arb_hi(_PI))
+        return (arb_lo(_PI), arb_hi(_PI))
     if value is sp.E:
         e = arb.const_e()
-        return (_arb_lo(e), _arb_hi(e))
+        return (arb_lo(e), arb_hi(e))
     if value.is_Float:
         f = float(value)
         return (f, f) if sp.Rational(value) == sp.Rational(f) else (_dn(f), _up(f))
@@ -428,28 +416,25 @@ def _const_tree(expr: sp.Expr) -> Interval:
         raise
 
 
+def _fold(op: Callable[[Interval, Interval], Interval], parts: list[_Fn]) -> _Fn:
+    """The interval function ``op(...op(op(p0, p1), p2)..., pk)`` of the parts (left fold, the
+    order of sympy's arguments)."""
+
+    def folded(box):
+        acc = parts[0](box)
+        for p in parts[1:]:
+            acc = op(acc, p(box))
+        return acc
+
+    return folded
+
+
 def _compile_op(expr: sp.Expr, index: dict[sp.Symbol, int], enclose: EncloseCallback | None) -> _Fn:
     """The interval extension of an operation node (sums, products, powers, functions)."""
     if expr.is_Add:
-        parts = [_compile(a, index, enclose) for a in expr.args]
-
-        def add(box, parts=parts):
-            acc = parts[0](box)
-            for p in parts[1:]:
-                acc = _add(acc, p(box))
-            return acc
-
-        return add
+        return _fold(interval_add, [_compile(a, index, enclose) for a in expr.args])
     if expr.is_Mul:
-        parts = [_compile(a, index, enclose) for a in expr.args]
-
-        def mul(box, parts=parts):
-            acc = parts[0](box)
-            for p in parts[1:]:
-                acc = _mul(acc, p(box))
-            return acc
-
-        return mul
+        return _fold(interval_mul, [_compile(a, index, enclose) for a in expr.args])
     if expr.is_Pow:
         base, ex = expr.args
         fb = _compile(base, index, enclose)
@@ -464,7 +449,7 @@ def _compile_op(expr: sp.Expr, index: dict[sp.Symbol, int], enclose: EncloseCall
         fe = _compile(ex, index, enclose)
         if base is sp.E:
             return lambda box: _exp(fe(box))
-        return lambda box: _exp(_mul(fe(box), _log(fb(box))))
+        return lambda box: _exp(interval_mul(fe(box), _log(fb(box))))
     head = expr.func
     if head in _UNARY:
         op = _UNARY[head]
@@ -474,16 +459,8 @@ def _compile_op(expr: sp.Expr, index: dict[sp.Symbol, int], enclose: EncloseCall
         fa = _compile(expr.args[0], index, enclose)
         return lambda box: _heaviside(fa(box))
     if head in (sp.Max, sp.Min):
-        parts = [_compile(a, index, enclose) for a in expr.args]
         op2 = _max if head is sp.Max else _min
-
-        def mm(box, parts=parts, op2=op2):
-            acc = parts[0](box)
-            for p in parts[1:]:
-                acc = op2(acc, p(box))
-            return acc
-
-        return mm
+        return _fold(op2, [_compile(a, index, enclose) for a in expr.args])
     call_args = _undef_call_args(expr)
     if call_args is not None:
         name = str(expr.func) if _is_opaque_call(expr) else str(expr)
@@ -674,7 +651,7 @@ def _mean_value(mv: tuple[_Fn, list[_Fn | None]], ivs: list[Interval], centre: l
             continue
         c = centre[k][0]
         dx = (_dn(ivs[k][0] - c), _up(ivs[k][1] - c))
-        acc = _add(acc, _mul(g(ivs), dx))
+        acc = interval_add(acc, interval_mul(g(ivs), dx))
     return acc
 
 

@@ -40,7 +40,8 @@ NaN propagates through the scalar and array helpers (a NaN bound means "unknown"
 ``-inf`` / ``+inf`` (no information) for the ends of an interval.
 
 Rigorous linear algebra built only on the rules above: :func:`sym_lambda_max_upper` (largest
-eigenvalue of symmetric matrices, batched) and :func:`spectral_norm_upper`.
+eigenvalue of symmetric matrices, batched), :func:`spectral_norm_upper` and, in Arb,
+:func:`nonneg_spectral_norm_upper` (nonnegative matrices, Collatz-Wielandt).
 """
 
 from __future__ import annotations
@@ -64,6 +65,8 @@ __all__ = [
     "arb_bounds",
     "arb_hi",
     "arb_lo",
+    "arb_norm2_up",
+    "arb_sqrt_up",
     "div_down",
     "div_up",
     "down",
@@ -77,6 +80,7 @@ __all__ = [
     "mul_up",
     "mul_up_np",
     "ndtr_rel_budget",
+    "nonneg_spectral_norm_upper",
     "norm2_up",
     "norm2_up_np",
     "spectral_norm_upper",
@@ -365,6 +369,12 @@ def ndtr_rel_budget(z) -> np.ndarray:
     return (_NDTR_Z2_ULPS * z * z + _NDTR_BASE_ULPS) * EPS
 
 
+def _matmul_err(A: np.ndarray, B: np.ndarray) -> np.ndarray:
+    """Entrywise bound of ``|fl(A @ B) - A @ B|`` (see :func:`matmul_bounds`)."""
+    k = A.shape[-1]
+    return add_up_np(up_np(2.0 * gamma(k + 1) * (np.abs(A) @ np.abs(B))), k * 8 * _TINY)
+
+
 def matmul_bounds(A, B) -> tuple[np.ndarray, np.ndarray]:
     """``(lo, hi)`` with ``lo <= A @ B <= hi`` entrywise for float arrays (batched like ``@``).
 
@@ -374,16 +384,9 @@ def matmul_bounds(A, B) -> tuple[np.ndarray, np.ndarray]:
     """
     A = np.asarray(A, dtype=np.float64)
     B = np.asarray(B, dtype=np.float64)
-    k = A.shape[-1]
     C = A @ B
-    err = add_up_np(up_np(2.0 * gamma(k + 1) * (np.abs(A) @ np.abs(B))), k * 8 * _TINY)
+    err = _matmul_err(A, B)
     return sub_down_np(C, err), add_up_np(C, err)
-
-
-def _matmul_err(A: np.ndarray, B: np.ndarray) -> np.ndarray:
-    """Entrywise bound of ``|fl(A @ B) - A @ B|`` (see :func:`matmul_bounds`)."""
-    k = A.shape[-1]
-    return add_up_np(up_np(2.0 * gamma(k + 1) * (np.abs(A) @ np.abs(B))), k * 8 * _TINY)
 
 
 # ------------------------------------------------------------------------------------- Arb
@@ -404,6 +407,27 @@ def arb_hi(v: arb) -> float:
 def arb_bounds(v: arb) -> tuple[float, float]:
     """``(arb_lo(v), arb_hi(v))``."""
     return arb_lo(v), arb_hi(v)
+
+
+def arb_sqrt_up(x: float) -> float:
+    """Upper bound of ``sqrt(q)`` for every ``q`` in ``[0, x]``, the root taken in Arb.
+
+    ``x < 0`` is read as 0 (an upper bound of a nonnegative quantity); ``inf``, ``-inf`` and NaN
+    give ``inf`` (no finite bound). The Arb twin of :func:`sqrt_up`, at most an ulp above it.
+    """
+    x = float(x)
+    if not math.isfinite(x):
+        return _INF
+    return arb_hi(arb(max(x, 0.0)).sqrt())
+
+
+def arb_norm2_up(values: Iterable[float]) -> float:
+    """Upper bound of the Euclidean norm ``sqrt(sum v**2)``, the squares, sum and root in Arb
+    (an infinite or NaN entry gives ``inf``). The Arb twin of :func:`norm2_up`."""
+    acc = arb(0)
+    for v in values:
+        acc += arb(float(v)) ** 2
+    return arb_hi(acc.sqrt())
 
 
 # ------------------------------------------------------------------- rigorous linear algebra
@@ -516,3 +540,32 @@ def spectral_norm_upper(W) -> np.ndarray | float:
     out = sqrt_up_np(np.maximum(lam, 0.0))
     out = np.where(np.all(W == 0, axis=(-1, -2)), 0.0, out)
     return out if out.ndim else float(out)
+
+
+def nonneg_spectral_norm_upper(M) -> float:
+    """Rigorous upper bound of ``||M||_2`` for an entrywise nonnegative float matrix, in Arb.
+
+    ``||M||_2^2 = rho(M^T M)`` and, for a nonnegative matrix ``B`` and any positive vector ``v``,
+    ``rho(B) <= max_i (B v)_i / v_i`` (Collatz-Wielandt: ``diag(v)^{-1} B diag(v)`` has these row
+    sums). ``v`` is the numerical top right singular vector of ``M`` (made positive); the products
+    are in ball arithmetic. The Frobenius norm (:func:`arb_norm2_up`) is a second bound; the
+    smaller one is returned. Tighter than :func:`spectral_norm_upper` for the small nonnegative
+    matrices of entrywise Jacobian bounds (docs/math/l1drac.md section 2, the bounded route).
+    """
+    M = np.asarray(M, dtype=float)
+    if not np.any(M):
+        return 0.0
+    fro = arb_norm2_up(M.ravel().tolist())
+    _, _, vt = np.linalg.svd(M)
+    v = np.abs(vt[0])
+    v = np.maximum(v, 1e-8 * float(v.max()))
+    rows, cols = M.shape
+    Ma = [[arb(float(M[i, j])) for j in range(cols)] for i in range(rows)]
+    va = [arb(float(x)) for x in v]
+    Mv = [sum((Ma[i][j] * va[j] for j in range(cols)), arb(0)) for i in range(rows)]
+    ratios = []
+    for j in range(cols):
+        btv = sum((Ma[i][j] * Mv[i] for i in range(rows)), arb(0))
+        ratios.append(arb_hi(btv / va[j]))
+    cw = arb_hi(arb(max(ratios)).sqrt())
+    return min(fro, cw)

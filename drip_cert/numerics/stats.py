@@ -20,7 +20,9 @@ For the validation (:mod:`drip_cert.validate`) it also offers one-sided bounds: 
 for a mean (:func:`t_one_sided`), Clopper-Pearson bounds for a proportion
 (:func:`clopper_pearson_upper`, :func:`clopper_pearson_lower`), distribution-free order-statistic
 bounds for an upper quantile (:func:`upper_quantile_bounds`) and the Bonferroni level for a
-family of tests (:func:`bonferroni_level`).
+family of tests (:func:`bonferroni_level`). :func:`clopper_pearson_upper` is drip-cert's one
+Clopper-Pearson implementation: with ``sound=True`` it proves its bound in Arb (the held-out form
+of the TaSIL certificate, docs/math/tasil.md 3.3 c, labels it sound).
 
 Determinism: sums are added path by path in global path order (:func:`accumulate`), so the
 result does not depend on how paths were grouped into chunks, bit for bit.
@@ -37,8 +39,10 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.stats
+from flint import arb, ctx
 
 from drip_cert.errors import SpecError
+from drip_cert.numerics.rounding import arb_hi, up
 
 __all__ = [
     "GapSums",
@@ -239,19 +243,105 @@ def bonferroni_level(level: float, m: int) -> float:
     return 1.0 - (1.0 - float(level)) / max(1, int(m))
 
 
-def clopper_pearson_upper(k, n: int, level: float):
+# Clopper-Pearson, sound mode: first relative step above scipy's inverse, and how many tenfold
+# steps to try before falling back to the trivial bound 1 (scipy's ppf is accurate to ~1e-12
+# relative); bits of the Arb evaluation (balls far narrower than the 1e-12 steps)
+_CP_STEP0 = 1e-12
+_CP_TRIES = 12
+_CP_PREC = 128
+
+
+def _miss_probability(level: float | None, alpha: float | None) -> tuple[float, float, bool]:
+    """``(level, miss, exact_miss)``: the float confidence of the scipy candidate, and the miss
+    probability ``1 - level``, which is the given ``alpha`` itself when ``exact_miss``."""
+    if (level is None) == (alpha is None):
+        raise TypeError("give the confidence as exactly one of level and alpha = 1 - level")
+    if level is None:
+        return 1.0 - float(alpha), float(alpha), True
+    return float(level), 1.0 - float(level), False
+
+
+def _proved_upper(k: int, n: int, candidate: float, tail: arb) -> float:
+    """The smallest float ``p`` of the upward sequence from ``candidate`` at which Arb proves
+    ``I_p(k + 1, n - k) >= 1 - tail``; ``1`` when none is found (``0 <= k < n``)."""
+    if k == 0:  # closed form 1 - tail^(1/n), enclosed in Arb
+        return min(1.0, arb_hi(1 - tail ** (arb(1) / n)))
+    target = 1 - tail
+    p = up(candidate)
+    step = _CP_STEP0
+    for _ in range(_CP_TRIES):
+        if p >= 1.0:
+            return 1.0
+        if arb(p).beta_lower(k + 1, n - k, regularized=True) >= target:
+            return p
+        p = up(p * (1.0 + step))
+        step *= 10.0
+    return 1.0
+
+
+def clopper_pearson_upper(
+    k, n: int, level: float | None = None, *, alpha: float | None = None, sound: bool = False
+):
     """One-sided Clopper-Pearson upper confidence bound on a binomial proportion.
 
     ``P(p <= upper) >= level`` for ``k`` successes in ``n`` trials, with no distributional
     assumption beyond independence: ``upper = Beta^{-1}(level; k + 1, n - k)`` and 1 when
-    ``k = n`` (for ``k = 0`` this is ``1 - (1 - level)^{1/n}``).
+    ``k >= n`` or ``n < 1`` (for ``k = 0`` this is ``1 - (1 - level)^{1/n} <= log(1/(1 -
+    level))/n``; docs/math/tasil.md 3.3 c).
+
+    Parameters
+    ----------
+    k
+        Success counts (scalar or array).
+    n
+        Number of trials.
+    level
+        Confidence level in (0, 1), e.g. 0.95.
+    alpha
+        The same confidence given as ``alpha = 1 - level`` (keyword only; exactly one of
+        ``level`` and ``alpha``). With ``sound``, the bound is proved at the confidence exactly
+        as given, and ``1 - alpha`` for a failure probability ``alpha`` is in general not a
+        float: give ``alpha`` then.
+    sound
+        Prove the bound: each entry is the smallest float, searched upward from scipy's quantile,
+        at which Arb (ball arithmetic) proves ``I_p(k + 1, n - k) >= level``; the regularized
+        incomplete beta is the ``Beta(k + 1, n - k)`` CDF, increasing in ``p``, so the result is
+        ``>=`` the exact bound. ``k = 0`` is enclosed in Arb from the closed form. Counts must
+        then be integers ``>= 0``. Default: scipy's quantile as it is (accurate to ~1e-12).
+
+    Returns
+    -------
+    np.ndarray
+        Upper bounds, of the shape of ``k``.
     """
+    lv, miss, exact_miss = _miss_probability(level, alpha)
     k = np.asarray(k, dtype=np.float64)
+    if sound and not (0.0 < lv < 1.0 and 0.0 < miss < 1.0):
+        raise SpecError(
+            f"Clopper-Pearson confidence must lie in (0, 1), got level={level!r}, alpha={alpha!r}",
+            field="delta" if exact_miss else "ci_level",
+        )
     if n < 1:
         return np.ones(k.shape)
     with np.errstate(invalid="ignore"):
-        up = scipy.stats.beta.ppf(level, k + 1.0, np.maximum(n - k, 1e-300))
-    return np.where(k >= n, 1.0, up)
+        upper = scipy.stats.beta.ppf(lv, k + 1.0, np.maximum(n - k, 1e-300))
+    upper = np.where(k >= n, 1.0, upper)
+    if not sound:
+        return upper
+    if np.any(k < 0) or np.any(k != np.floor(k)):
+        raise SpecError(f"counts k must be integers >= 0, got {k!r}", field="k")
+    old_prec = ctx.prec
+    ctx.prec = _CP_PREC
+    try:
+        # the exact miss probability: alpha as given, or 1 - level (exact in 128 bits)
+        tail = arb(miss) if exact_miss else 1 - arb(lv)
+        flat = [
+            1.0 if ki >= n else _proved_upper(int(ki), int(n), float(ci), tail)
+            for ki, ci in zip(k.flat, upper.flat)
+        ]
+    finally:
+        ctx.prec = old_prec
+    return np.reshape(np.asarray(flat, dtype=np.float64), k.shape)
 
 
 def clopper_pearson_lower(k, n: int, level: float):

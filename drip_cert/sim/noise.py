@@ -22,7 +22,7 @@ import math
 
 from drip_cert._jax import jax, jnp
 
-__all__ = ["normals", "threefry2x32"]
+__all__ = ["normals", "normals_via_jax", "threefry2x32"]
 
 # Threefry-2x32 rotation constants (Random123 / Skein), used for rounds 0-3, 4-7, 8-11, ...
 _ROTATIONS = ((13, 15, 26, 6), (17, 29, 16, 24))
@@ -70,10 +70,34 @@ def normals(keypair, idx, j, d: int):
     endpoints is ``1 - 2^-53``, so the largest normal is about 8.3: tails are exact to
     ``P(|Z| > 8.3) ~ 1e-16``.
     """
+    w0, w1 = _counters(idx, j, d)
+    return _to_normal(*threefry2x32(keypair[0], keypair[1], w0, w1))
+
+
+def normals_via_jax(keypair, idx, j, d: int):
+    """:func:`normals` through JAX's own ``threefry_2x32`` primitive on the flattened counters.
+
+    The reference that :func:`normals` equals bit for bit (``tests/test_noise.py``) and the slow
+    variant timed by ``benchmarks/mc_throughput.py``: on the CPU the primitive is a rolled loop.
+    """
+    from jax.extend.random import threefry_2x32
+
+    w0, w1 = _counters(idx, j, d)
+    out = threefry_2x32(keypair, jnp.concatenate([w0.reshape(-1), w1.reshape(-1)]))
+    half = w0.size
+    return _to_normal(out[:half].reshape(w0.shape), out[half:].reshape(w0.shape))
+
+
+def _counters(idx, j, d: int):
+    """The counter words ``(idx[b], j d + c)`` of entry ``(b, c)``, each ``(B, d)`` uint32."""
     b = idx.shape[0]
     w0 = jnp.broadcast_to(idx[:, None], (b, d))
     w1 = jnp.broadcast_to((j * jnp.uint32(d) + jnp.arange(d, dtype=jnp.uint32))[None, :], (b, d))
-    hi, lo = threefry2x32(keypair[0], keypair[1], w0, w1)
+    return w0, w1
+
+
+def _to_normal(hi, lo):
+    """``sqrt(2) erfinv(u)``, ``u = (k + 1/2) 2^-52 - 1`` from the high 53 of the 64 bits."""
     bits = (hi.astype(jnp.uint64) << jnp.uint64(32)) | lo.astype(jnp.uint64)
     u = ((bits >> jnp.uint64(11)).astype(jnp.float64) + 0.5) * (2.0**-52) - 1.0
     return math.sqrt(2.0) * jax.scipy.special.erfinv(u)

@@ -73,7 +73,7 @@ CONSTANT_NAMES: tuple[str, ...] = (
     "eps_a",
 )
 """The keys of ``[constants]``: every real constant of L1-DRAC Assumptions 1-8 and (16), (18a)
-that the certificate computes (the names of ``drip_cert.bounds.l1drac``'s constants table)."""
+that the certificate computes (the real constants of ``drip_cert.bounds.l1drac.constants``)."""
 
 POSITIVE_CONSTANTS = frozenset({"lambda", "eps_r", "eps_a"})
 """Constants that must be > 0 (a contraction rate, the slacks of (16)); the others bound norms
@@ -475,26 +475,38 @@ class L1Settings:
         d = _defaults(cls)
         p = r.get("p", positive_int, d["p"])
         p_star = r.get("p_star", integer, p, minimum=p, rule=f"an integer >= p = {p}")
-        kw: dict[str, Any] = {}
-        for key, example in (
-            ("lambda_s", 10.0),
-            ("omega", 50.0),
-            ("Ts", 1e-3),
-            ("rho_r", 1.0),
-            ("rho_a", 1.0),
-        ):
-            kw[key] = r.get(key, positive_float, None, example=example)
         return cls(
             p=p,
             p_star=p_star,
-            delta=r.get("delta", probability, None, example=0.05),
+            **read_l1_design(r),
             alpha=r.get("alpha", nonneg_float, None, example=0.0),
             eps_r=r.get("eps_r", positive_float, d["eps_r"]),
             eps_a=r.get("eps_a", positive_float, d["eps_a"]),
             lip_f=r.get("lip_f", boolean, None, example=True),
             given=r.given,
-            **kw,
         )
+
+
+def read_l1_design(r: TableReader) -> dict[str, float | None]:
+    """The L1-DRAC design parameters of a table, ``None`` where absent: ``lambda_s``, ``omega``,
+    ``Ts``, ``rho_r``, ``rho_a`` (finite numbers > 0; absent = let the designer find it) and
+    ``delta`` (a probability in (0, 1); absent = no kappa).
+
+    Shared by ``[l1drac]`` of a spec (:class:`L1Settings`) and ``[design]`` of a ``design-l1``
+    constants file (:mod:`drip_cert.bounds.l1drac.toml`), whose keys mean the same
+    (:attr:`L1Settings.KEYS`).
+    """
+    out: dict[str, float | None] = {}
+    for key, example in (
+        ("lambda_s", 10.0),
+        ("omega", 50.0),
+        ("Ts", 1e-3),
+        ("rho_r", 1.0),
+        ("rho_a", 1.0),
+    ):
+        out[key] = r.get(key, positive_float, None, example=example)
+    out["delta"] = r.get("delta", probability, None, example=0.05)
+    return out
 
 
 # ------------------------------------------------------------------------------ [tasil]
@@ -694,6 +706,7 @@ __all__ = [
     "positive_int",
     "positive_or_inf",
     "probability",
+    "read_l1_design",
     "read_real",
     "string",
 ]

@@ -19,5 +19,6 @@ mlp = type(mlp)(
     tuple(np.random.default_rng(SEED + 1).normal(scale=0.3, size=b.shape) for b in mlp.biases),
     "tanh",
 )
-mlp.save(Path(__file__).with_name("h.npz"))
-print("wrote", Path(__file__).with_name("h.npz"), "sizes", mlp.sizes)
+OUT = Path(__file__).resolve().parents[2] / "drip_cert" / "data" / "paper_4d" / "h.npz"
+mlp.save(OUT)
+print("wrote", OUT, "sizes", mlp.sizes)

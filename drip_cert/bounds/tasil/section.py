@@ -1,15 +1,20 @@
-"""The TaSIL section of the certificate: sound ``h_0, h_1`` along the expert trajectories, the
-regularity constant ``L_Delta`` with its provenance, and the certificate of docs/math/tasil.md
-sections 3-4 (this project's construction, not TaSIL's own constant).
+"""The TaSIL section of the certificate, built from a :class:`~drip_cert.model.system.System`:
+sound ``h_0, h_1`` along the expert trajectories, the regularity constant ``L_Delta`` with its
+provenance, the tube radius ``R``, and the certificate of docs/math/tasil.md sections 3-4 (this
+project's construction, not TaSIL's own constant).
 """
 
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 
 from drip_cert.analysis.policy_regularity import jacobian_lipschitz
+from drip_cert.bounds.tasil.certificate import TasilCertificate, tasil_certificate
+from drip_cert.bounds.tasil.forms import FORMS, TasilForm
+from drip_cert.bounds.tasil.trajectory import TrajectoryH, h_continuous
 from drip_cert.learn.data import Demonstrations
 from drip_cert.learn.imitation import nominal_field
 from drip_cert.model.system import System
@@ -19,13 +24,15 @@ from drip_cert.spec.settings import TasilSettings
 
 __all__ = ["tasil_section", "trajectory_h"]
 
-TAU_MARGIN = 1.25
 #: held-out thresholds tau_j = 1.25 x the training maxima of h_j: any tau computed from the training
 #: data is valid for the held-out form (docs/math/tasil.md 3.3 c); the bare maxima are exceeded by
 #: about 1/n of fresh states, which alone spends the form's confidence budget
+TAU_MARGIN = 1.25
 
 
-def trajectory_h(s: System, demos: Demonstrations, L_Delta: float, speed_sound: bool):
+def trajectory_h(
+    s: System, demos: Demonstrations, L_Delta: float, speed_sound: bool
+) -> tuple[list[TrajectoryH], How]:
     """Per-trajectory sound ``(h_0, h_1)`` of ``Delta = pi_IL - pi*`` along expert trajectories.
 
     Between grid points the speed of an autonomous contracting closed loop does not grow
@@ -35,18 +42,27 @@ def trajectory_h(s: System, demos: Demonstrations, L_Delta: float, speed_sound: 
     ``x``, or on a box that contains a proved forward-invariant set around the support) and ``f``
     does not depend on ``t``. Otherwise the grid maximum of the speed is used and the result is
     labelled an estimate.
+
+    Returns
+    -------
+    (list of TrajectoryH, How)
+        One :class:`~drip_cert.bounds.tasil.trajectory.TrajectoryH` per trajectory of ``demos``
+        (:func:`~drip_cert.bounds.tasil.trajectory.h_continuous`), and how they were obtained.
     """
     from drip_cert._jax import jax, jnp
-    from drip_cert.bounds.tasil import h_continuous
 
     num = s.numeric
-    delta = jax.jit(jax.vmap(lambda z: num.learned(z) - num.expert(z)))
-    jac = jax.jit(jax.vmap(jax.jacfwd(lambda z: num.learned(z) - num.expert(z))))
+
+    def error(z):
+        return num.learned(z) - num.expert(z)
+
+    delta = jax.jit(jax.vmap(error))
+    jac = jax.jit(jax.vmap(jax.jacfwd(error)))
     field = nominal_field(s)
     speed_fn = jax.jit(jax.vmap(lambda z: jnp.linalg.norm(field(0.0, z, num.expert(z)))))
     autonomous = not any(s.t in e.free_symbols for e in s.f) and s.g_is_constant
     sound = speed_sound and autonomous
-    hs = []
+    hs: list[TrajectoryH] = []
     for traj in demos.states:
         X = jnp.asarray(traj)
         d = np.asarray(delta(X))
@@ -68,11 +84,15 @@ def tasil_section(
     room: float = math.inf,
     speed_sound: bool = False,
     method: str = "tasil-1",
-):
+) -> tuple[TasilCertificate, dict[str, Any], tuple[Quantity, ...]]:
     """The TaSIL certificate of ``s.learned`` (docs/math/tasil.md sections 3-4).
 
     Parameters
     ----------
+    s
+        The system, with its learned policy.
+    train, heldout
+        Training demonstrations, and fresh expert trajectories unused in training (or ``None``).
     gamma0
         The linear delta-ISS gain of the expert closed loop (tighter comparison bound).
     room
@@ -83,6 +103,8 @@ def tasil_section(
     speed_sound
         Whether the expert's speed is proved non-increasing along its trajectories (the rate holds
         wherever they go), which makes the continuous-time sups of ``h_0, h_1`` sound.
+    settings, method
+        The ``[tasil]`` settings (``delta``, ``eta``, ``tube_radius``) and the recorded method.
 
     Returns
     -------
@@ -90,8 +112,6 @@ def tasil_section(
         ``quantities`` are the inputs the TaSIL check rests on (``L_dpi_*``, ``h0``, ``h1``), each
         with its computed label. ``L_Delta = L_dpi(pi_IL) + L_dpi(pi*)`` (triangle inequality).
     """
-    from drip_cert.bounds.tasil import tasil_certificate
-
     # the tube of assumption A2: the box around all expert states, enlarged by the tube radius
     # (1 when no finite radius is set); region-limited bounds then cap R at that radius
     margin = settings.tube_radius if math.isfinite(settings.tube_radius) else 1.0
@@ -102,8 +122,10 @@ def tasil_section(
     R = settings.tube_radius
     if not (L_il.scope.all_x and L_ex.scope.all_x):
         R = min(R, margin)
-    if math.isfinite(room):
-        # strictly below the room (the first-exit argument needs gap < room)
+    if math.isfinite(room) and room > 0.0:
+        # strictly below the room (the first-exit argument needs gap < room); with no room at
+        # all (the invariant set fills the region) R is left as it is and the certificate marks
+        # the TaSIL scope unjustified (bounds/certificate.py, _tasil_scope)
         R = min(R, math.nextafter(room, 0.0))
     L_Delta = Quantity.derive(
         "L_Delta",
@@ -112,7 +134,7 @@ def tasil_section(
         source="DRIP Assumption PolicyRegularity (b)",
         note="L_dpi(pi_IL) + L_dpi(pi*)",
     )
-    provenance = {
+    provenance: dict[str, Any] = {
         "L_dpi_learned": L_il.to_dict(),
         "L_dpi_expert": L_ex.to_dict(),
         "gamma0": gamma0.to_dict(),
@@ -135,25 +157,25 @@ def tasil_section(
             tuple(qs),
         )
     h_train, how_t = trajectory_h(s, train, L_Delta.value, speed_sound)
-    h_val, _ = (
-        trajectory_h(s, heldout, L_Delta.value, speed_sound)
-        if heldout is not None
-        else (None, how_t)
-    )
+    train_h0, train_h1 = [h.h0 for h in h_train], [h.h1 for h in h_train]
+    heldout_h0 = heldout_h1 = None
+    if heldout is not None:
+        h_val, _ = trajectory_h(s, heldout, L_Delta.value, speed_sound)
+        heldout_h0, heldout_h1 = [h.h0 for h in h_val], [h.h1 for h in h_val]
     # thresholds computed from the training data only (valid for the held-out form): the
     # training maxima with a 25 % margin, so that fresh states rarely exceed them
-    tau = (TAU_MARGIN * max(h.h0 for h in h_train), TAU_MARGIN * max(h.h1 for h in h_train))
+    tau = (TAU_MARGIN * max(train_h0), TAU_MARGIN * max(train_h1))
     cert = tasil_certificate(
-        [h.h0 for h in h_train],
-        [h.h1 for h in h_train],
+        train_h0,
+        train_h1,
         gamma0=gamma0.value,
         tau=tau,
         L_Delta=L_Delta.value,
         delta=settings.delta,
         eta=settings.eta,
         R=R,
-        heldout_h0=None if h_val is None else [h.h0 for h in h_val],
-        heldout_h1=None if h_val is None else [h.h1 for h in h_val],
+        heldout_h0=heldout_h0,
+        heldout_h1=heldout_h1,
         method=method,
         continuous=True,
     )
@@ -178,13 +200,17 @@ def tasil_section(
 
 
 def _not_lipschitz(
-    L: Quantity, train, heldout, gamma0: Quantity, R: float, settings: TasilSettings, method: str
-):
+    L: Quantity,
+    train: Demonstrations,
+    heldout: Demonstrations | None,
+    gamma0: Quantity,
+    R: float,
+    settings: TasilSettings,
+    method: str,
+) -> TasilCertificate:
     """The TaSIL certificate when a policy's Jacobian has no Lipschitz constant: every form
     fails (DRIP Assumption PolicyRegularity (b)); ``h_0``, ``h_1`` are not computed (their sound
     continuous-time sups need ``L_Delta``)."""
-    from drip_cert.bounds.tasil import FORMS, TasilCertificate, TasilForm
-
     why = f"DRIP Assumption PolicyRegularity (b) fails for {L.name}: {L.note}"
     forms = tuple(TasilForm(name, math.inf, False, True, "not computed: " + why) for name in FORMS)
     return TasilCertificate(

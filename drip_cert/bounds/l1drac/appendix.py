@@ -1,11 +1,13 @@
 """Appendix A of L1-DRAC: every constant and map of the certificate, as pure functions.
 
 Source: A. Gahlawat, S. H. Karumanchi, N. Hovakimyan, "L1-DRAC: Distributionally Robust Adaptive
-Control -- Global Results", arXiv:2509.04619 (2025-09-04), Appendix A (printed pp. 43-46), and the
-bandwidth/sampling functions of Sec. 3.2 (printed pp. 14-15): Gamma_r, Gamma_a (18b, c),
-Theta_r, Theta_a (22, 23) and the Upsilon maps (25a-c). Equation numbers are the paper's.
+Control -- Global Results", arXiv:2509.04619 (2025-09-04), Appendix A (printed pp. 43-46):
+(A.1)-(A.19). Equation numbers are the paper's. The functions of Sec. 3.2 built on these
+(Gamma_r, Gamma_a, Theta_r, Theta_a, the Upsilon_a maps and the two sides of every condition) are
+in :mod:`drip_cert.bounds.l1drac.sides`.
 
-Every function takes a constants object ``c`` (a :class:`drip_cert.bounds.l1drac.L1Constants`,
+Every function takes a constants object ``c`` (a
+:class:`~drip_cert.bounds.l1drac.constants.L1Constants`,
 read through its attributes only) and the moment order ``p``; the piecewise-constant-law
 quantities (A.13)-(A.19) also take the control parameters ``omega``, ``Ts`` and ``lambda_s``.
 
@@ -37,11 +39,13 @@ relative precision down to ``Ts = 1e-14`` and below.
 
 One transcription, two arithmetics
 ----------------------------------
-Every formula below is written once, generic over a small numeric backend (:class:`FloatOps`:
-``const``, ``sqrt``, ``exp``, ``expm1``, ``max``, ``mid``, ``series_remainder``). The constants
-object carries its backend as the attribute ``num``: :class:`~drip_cert.bounds.l1drac.L1Constants`
-carries :data:`FLOAT` (float64, :mod:`math`; the designer's fast searches), and the Arb view of
-:mod:`drip_cert.bounds.l1drac_verify` carries its Arb backend, so the same code evaluates every
+Every formula below is written once, generic over a small numeric backend
+(:class:`~drip_cert.bounds.l1drac.backend.FloatOps`: ``const``, ``sqrt``, ``exp``, ``expm1``,
+``max``, ``mid``, ``series_remainder``). The constants object carries its backend as the attribute
+``num``: :class:`~drip_cert.bounds.l1drac.constants.L1Constants` carries
+:data:`~drip_cert.bounds.l1drac.backend.FLOAT` (float64, :mod:`math`; the designer's fast
+searches), and the Arb view of :mod:`drip_cert.bounds.l1drac.verify` carries
+:data:`~drip_cert.bounds.l1drac.backend.ARB`, so the same code evaluates every
 constant, map and condition in ball arithmetic from the same float inputs (the rigorous re-check
 of a returned design). The result dataclasses carry the backend on to the maps that read them.
 Rules that keep the Arb evaluation rigorous: every elementary function goes through ``num``,
@@ -55,25 +59,11 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, TypeAlias
 
-if TYPE_CHECKING:  # pragma: no cover
-    from drip_cert.bounds.l1drac import L1Constants
+from drip_cert.bounds.l1drac.backend import FLOAT, FloatOps, Real
+from drip_cert.bounds.l1drac.constants import L1Constants
 
 __all__ = [
-    "Real",
-    "FloatOps",
-    "FLOAT",
-    "RELATIONS",
-    "margin_of",
-    "unmatched_gain_r",
-    "unmatched_gain_a",
-    "sides_16a",
-    "sides_16b",
-    "sides_21a",
-    "sides_21b",
-    "sides_24",
-    "budget_a",
     "frak_p",
     "frak_p_prime",
     "frak_p_dprime",
@@ -81,6 +71,7 @@ __all__ = [
     "RefConstants",
     "TrueConstants",
     "SamplingConstants",
+    "reference_hats",
     "reference_constants",
     "true_constants",
     "sampling_constants",
@@ -90,70 +81,10 @@ __all__ = [
     "upsilon_minus_tilde",
     "upsilon_minus",
     "upsilon_ring",
-    "gamma_r",
-    "gamma_a",
-    "theta_r",
-    "theta_a",
-    "upsilon_a1",
-    "upsilon_a2",
-    "upsilon_a3",
-    "upsilon_sum",
 ]
-
-
-# --------------------------------------------------------------------------------------------
-# Numeric backends
-# --------------------------------------------------------------------------------------------
-
-#: A real number of the active backend: ``float`` (:data:`FLOAT`) or ``flint.arb`` (the Arb
-#: backend of :mod:`drip_cert.bounds.l1drac_verify`).
-Real: TypeAlias = Any
 
 #: Below this |x| the series of (e^x - 1 - x)/x^2 is summed (its 9th term is < 1e-16 relative).
 _PHI2_SERIES_BELOW = 1e-2
-
-
-class FloatOps:
-    """The float64 backend: :mod:`math`'s functions; the designer's searches run on it.
-
-    The Arb backend (:class:`drip_cert.bounds.l1drac_verify.ArbOps`) has the same methods.
-    """
-
-    name = "float64"
-    #: Terms k = 0..8 of a series in x with |x| < 1e-2 reach float64 precision (x^9/11! < 1e-25).
-    series_terms = 9
-
-    @staticmethod
-    def const(x: float) -> float:
-        """A number of this backend equal to ``x`` (float, int)."""
-        return float(x)
-
-    sqrt = staticmethod(math.sqrt)
-    exp = staticmethod(math.exp)
-    expm1 = staticmethod(math.expm1)
-
-    @staticmethod
-    def max(a: float, b: float) -> float:
-        """max(a, b)."""
-        return max(a, b)
-
-    @staticmethod
-    def mid(x: float) -> float:
-        """The float used to choose between two valid formulas (the value itself here)."""
-        return x
-
-    @staticmethod
-    def series_remainder(total: float, x: float, n: int, denom: float) -> float:
-        """``total`` plus the remainder ``|x|^n / (denom (1 - |x|))`` of a truncated series.
-
-        In float64 the remainder is below an ulp of ``total`` where the series is used, so the
-        total is returned unchanged; the Arb backend adds it as a ball radius.
-        """
-        return total
-
-
-#: The float64 backend (the default of every constants object).
-FLOAT = FloatOps()
 
 
 # --------------------------------------------------------------------------------------------
@@ -277,42 +208,6 @@ def reference_constants(c: L1Constants, p: int) -> RefConstants:
     dmp = c.Delta_mu_par
     par = c.Delta_p_par + c.Delta_sigma_par  # (Delta_p^par + Delta_sigma^par), everywhere below
     g2m = dg * dg * dmp / sl  # Delta_g^2 Delta_mu^par / sqrt(lambda)
-    # (A.3a)-(A.3c)
-    circ_1 = c.Delta_p**2 + (c.Delta_p + c.Delta_sigma) ** 2
-    circ_2 = dmp / sl * (h1 + g2m)
-    circ_3 = fp1 / sl * par * (h1 + 2.0 * g2m)
-    circ_4 = par * dg / lam * (fp1**2 * dg * par + sm * (2.0 * c.Delta_p + c.Delta_sigma))
-    # (A.4a)-(A.4c)
-    ocirc_1 = 2.0 * c.Delta_sigma * (c.Delta_p + c.Delta_sigma)
-    ocirc_2 = dmp / sl * h2
-    ocirc_3 = fp1 / sl * (par * h2 + c.Delta_sigma_par * (h1 + 2.0 * g2m))
-    ocirc_4 = (
-        dg
-        / lam
-        * (
-            par * (2.0 * fp1**2 * dg * c.Delta_sigma_par + sm * c.Delta_sigma)
-            + sm * c.Delta_sigma_par * (2.0 * c.Delta_p + c.Delta_sigma)
-        )
-    )
-    # (A.5a)-(A.5d)
-    odot_1 = c.Delta_sigma**2
-    odot_2 = 2.0 * c.Delta_g_perp * c.Delta_mu_perp
-    odot_3 = 2.0 * fp * (c.Delta_g_perp * (c.Delta_p_perp + c.Delta_sigma_perp) + c.Delta_p)
-    odot_4 = dmp / sl * (h1 + h3 + 2.0 * g2m)
-    odot_5 = dmp * (h4 / sl + 4.0 * dg) + 2.0 * sl * dg * fp * par
-    odot_6 = fp1 / sl * (par * (h3 + 2.0 * g2m) + c.Delta_sigma_par * h2)
-    odot_7 = fp1 * par * (h4 / sl + 2.0 * dg)
-    odot_8 = c.Delta_sigma_par * dg / lam * (fp1**2 * dg * c.Delta_sigma_par + sm * c.Delta_sigma)
-    # (A.6a)-(A.6b)
-    otimes_1 = 2.0 * fp * c.Delta_g_perp * c.Delta_sigma_perp
-    otimes_2 = dmp * h2 / sl
-    otimes_3 = 2.0 * fp * sl * dg * c.Delta_sigma_par
-    otimes_4 = fp1 * c.Delta_sigma_par * (h3 + 2.0 * g2m) / sl
-    otimes_5 = fp1 * c.Delta_sigma_par * (h4 / sl + 2.0 * dg)
-    # (A.7a)
-    oast_1 = 2.0 * c.Delta_g_perp * c.Delta_mu_perp
-    oast_2 = dmp * (h3 + g2m) / sl
-    oast_3 = dmp * (h4 / sl + 4.0 * dg)
     return RefConstants(
         p=p,
         lam=lam,
@@ -321,30 +216,44 @@ def reference_constants(c: L1Constants, p: int) -> RefConstants:
         hat_2=h2,
         hat_3=h3,
         hat_4=h4,
-        circ_1=circ_1,
-        circ_2=circ_2,
-        circ_3=circ_3,
-        circ_4=circ_4,
-        ocirc_1=ocirc_1,
-        ocirc_2=ocirc_2,
-        ocirc_3=ocirc_3,
-        ocirc_4=ocirc_4,
-        odot_1=odot_1,
-        odot_2=odot_2,
-        odot_3=odot_3,
-        odot_4=odot_4,
-        odot_5=odot_5,
-        odot_6=odot_6,
-        odot_7=odot_7,
-        odot_8=odot_8,
-        otimes_1=otimes_1,
-        otimes_2=otimes_2,
-        otimes_3=otimes_3,
-        otimes_4=otimes_4,
-        otimes_5=otimes_5,
-        oast_1=oast_1,
-        oast_2=oast_2,
-        oast_3=oast_3,
+        # (A.3a)-(A.3c)
+        circ_1=c.Delta_p**2 + (c.Delta_p + c.Delta_sigma) ** 2,
+        circ_2=dmp / sl * (h1 + g2m),
+        circ_3=fp1 / sl * par * (h1 + 2.0 * g2m),
+        circ_4=par * dg / lam * (fp1**2 * dg * par + sm * (2.0 * c.Delta_p + c.Delta_sigma)),
+        # (A.4a)-(A.4c)
+        ocirc_1=2.0 * c.Delta_sigma * (c.Delta_p + c.Delta_sigma),
+        ocirc_2=dmp / sl * h2,
+        ocirc_3=fp1 / sl * (par * h2 + c.Delta_sigma_par * (h1 + 2.0 * g2m)),
+        ocirc_4=(
+            dg
+            / lam
+            * (
+                par * (2.0 * fp1**2 * dg * c.Delta_sigma_par + sm * c.Delta_sigma)
+                + sm * c.Delta_sigma_par * (2.0 * c.Delta_p + c.Delta_sigma)
+            )
+        ),
+        # (A.5a)-(A.5d)
+        odot_1=c.Delta_sigma**2,
+        odot_2=2.0 * c.Delta_g_perp * c.Delta_mu_perp,
+        odot_3=2.0 * fp * (c.Delta_g_perp * (c.Delta_p_perp + c.Delta_sigma_perp) + c.Delta_p),
+        odot_4=dmp / sl * (h1 + h3 + 2.0 * g2m),
+        odot_5=dmp * (h4 / sl + 4.0 * dg) + 2.0 * sl * dg * fp * par,
+        odot_6=fp1 / sl * (par * (h3 + 2.0 * g2m) + c.Delta_sigma_par * h2),
+        odot_7=fp1 * par * (h4 / sl + 2.0 * dg),
+        odot_8=(
+            c.Delta_sigma_par * dg / lam * (fp1**2 * dg * c.Delta_sigma_par + sm * c.Delta_sigma)
+        ),
+        # (A.6a)-(A.6b)
+        otimes_1=2.0 * fp * c.Delta_g_perp * c.Delta_sigma_perp,
+        otimes_2=dmp * h2 / sl,
+        otimes_3=2.0 * fp * sl * dg * c.Delta_sigma_par,
+        otimes_4=fp1 * c.Delta_sigma_par * (h3 + 2.0 * g2m) / sl,
+        otimes_5=fp1 * c.Delta_sigma_par * (h4 / sl + 2.0 * dg),
+        # (A.7a)
+        oast_1=2.0 * c.Delta_g_perp * c.Delta_mu_perp,
+        oast_2=dmp * (h3 + g2m) / sl,
+        oast_3=dmp * (h4 / sl + 4.0 * dg),
         num=num,
     )
 
@@ -401,23 +310,6 @@ def true_constants(c: L1Constants, p: int) -> TrueConstants:
     h3 = dg * c.Delta_f * (1.0 - ind) / sl
     h4 = (dg * (c.L_mu + c.L_f * ind) + c.Delta_g_dot) / sl
     h5 = num.sqrt(num.const(c.m)) * dg * (c.L_p + c.L_sigma)
-    # (A.9)
-    ocirc_1 = fp1 * lpar * h1 / sl
-    # (A.10a)
-    odot_1 = (c.L_p + c.L_sigma) ** 2
-    odot_2 = lmp * h1 / sl
-    odot_3 = fp1 * lpar * h2 / sl
-    # (A.10b) -- ERRATUM: the paper prints hat-Delta_6 (undefined); it is hat-Delta_5 (D.132b).
-    odot_4 = lpar * (h5 + dg * dg * fp1**2 * lpar) / lam
-    # (A.11a)-(A.11c)
-    otimes_1 = 2.0 * c.Delta_g_perp * fp * (c.L_p_perp + c.L_sigma_perp)
-    otimes_2 = 2.0 * sl * dg * fp * lpar + lmp * h2 / sl
-    otimes_3 = fp1 * lpar * h3 / sl
-    otimes_4 = fp1 * lpar * (h4 / sl + 2.0 * dg * (1.0 + dg / lam * lmp))
-    # (A.12)
-    oast_1 = 2.0 * c.Delta_g_perp * c.L_mu_perp
-    oast_2 = lmp * h3 / sl
-    oast_3 = lmp * (h4 / sl + dg * (4.0 + dg / lam * lmp))
     return TrueConstants(
         p=p,
         lam=lam,
@@ -426,18 +318,23 @@ def true_constants(c: L1Constants, p: int) -> TrueConstants:
         hat_3=h3,
         hat_4=h4,
         hat_5=h5,
-        ocirc_1=ocirc_1,
-        odot_1=odot_1,
-        odot_2=odot_2,
-        odot_3=odot_3,
-        odot_4=odot_4,
-        otimes_1=otimes_1,
-        otimes_2=otimes_2,
-        otimes_3=otimes_3,
-        otimes_4=otimes_4,
-        oast_1=oast_1,
-        oast_2=oast_2,
-        oast_3=oast_3,
+        # (A.9)
+        ocirc_1=fp1 * lpar * h1 / sl,
+        # (A.10a)
+        odot_1=(c.L_p + c.L_sigma) ** 2,
+        odot_2=lmp * h1 / sl,
+        odot_3=fp1 * lpar * h2 / sl,
+        # (A.10b) -- ERRATUM: the paper prints hat-Delta_6 (undefined); it is hat-Delta_5 (D.132b).
+        odot_4=lpar * (h5 + dg * dg * fp1**2 * lpar) / lam,
+        # (A.11a)-(A.11c)
+        otimes_1=2.0 * c.Delta_g_perp * fp * (c.L_p_perp + c.L_sigma_perp),
+        otimes_2=2.0 * sl * dg * fp * lpar + lmp * h2 / sl,
+        otimes_3=fp1 * lpar * h3 / sl,
+        otimes_4=fp1 * lpar * (h4 / sl + 2.0 * dg * (1.0 + dg / lam * lmp)),
+        # (A.12)
+        oast_1=2.0 * c.Delta_g_perp * c.L_mu_perp,
+        oast_2=lmp * h3 / sl,
+        oast_3=lmp * (h4 / sl + dg * (4.0 + dg / lam * lmp)),
         num=num,
     )
 
@@ -546,7 +443,7 @@ def sampling_constants(
         (A.13d), (A.14) and (A.17). Every Upsilon map is a sum of products of non-negative factors,
         each non-decreasing in these two replaced quantities, so the envelope maps are >= the
         paper's maps; and every factor of the envelope is non-decreasing in Ts (proof in
-        :func:`drip_cert.bounds.l1drac.largest_Ts`).
+        :func:`drip_cert.bounds.l1drac.searches.largest_Ts`).
 
     Returns
     -------
@@ -599,23 +496,11 @@ def sampling_constants(
     )
     bar_2 = 2.0 * fp1 * c.Delta_sigma * (s2T + gt * Ts_gamma_1)
     bar_3 = 2.0 * Ts * (c.Delta_f + (1.0 + gt) * c.Delta_mu)
-    # (A.16a)-(A.16c)
-    one_m_eu = -num.expm1(-u)  # 1 - e^{-lambda_s Ts}
-    mu_1 = Ts * gamma_mu_hat + bar_1 * gamma_mu + c.Delta_mu_par * one_m_eu
-    mu_2 = bar_2 * gamma_mu
-    mu_3 = Ts * gamma_mu * bar_3 + c.Delta_mu_par * one_m_eu
-    # (A.17a) -- ERRATUM note: (D.142b) carries a stray gamma'_sigma(omega, Ts), defined nowhere;
-    # Prop. D.11 has no such term, so (A.17a) is implemented as printed, without it.
+    one_m_eu = -num.expm1(-u)  # 1 - e^{-lambda_s Ts}, in (A.16a), (A.16c)
     lpar = c.L_p_par + c.L_sigma_par
     lhat_par = c.L_p_par_hat + c.L_sigma_par_hat
     sq_b1 = num.sqrt(bar_1)
-    sigma_1 = (lpar * sq_b1 + Ts * lhat_par) * (1.0 + g2) + (
-        gamma_sigma * sq_b1 + Ts * gamma_sigma_hat
-    )
-    # (A.17b)
-    bracket = gamma_sigma + (1.0 + g2) * lpar
-    sigma_2 = num.sqrt(bar_2) * bracket
-    sigma_3 = num.sqrt(bar_3) * bracket
+    bracket = gamma_sigma + (1.0 + g2) * lpar  # of (A.17b)
     return SamplingConstants(
         consts=c,
         p=p,
@@ -635,12 +520,17 @@ def sampling_constants(
         bar_1=bar_1,
         bar_2=bar_2,
         bar_3=bar_3,
-        mu_1=mu_1,
-        mu_2=mu_2,
-        mu_3=mu_3,
-        sigma_1=sigma_1,
-        sigma_2=sigma_2,
-        sigma_3=sigma_3,
+        # (A.16a)-(A.16c)
+        mu_1=Ts * gamma_mu_hat + bar_1 * gamma_mu + c.Delta_mu_par * one_m_eu,
+        mu_2=bar_2 * gamma_mu,
+        mu_3=Ts * gamma_mu * bar_3 + c.Delta_mu_par * one_m_eu,
+        # (A.17a) -- ERRATUM note: (D.142b) carries a stray gamma'_sigma(omega, Ts), defined
+        # nowhere; Prop. D.11 has no such term, so (A.17a) is implemented as printed, without it.
+        sigma_1=(lpar * sq_b1 + Ts * lhat_par) * (1.0 + g2)
+        + (gamma_sigma * sq_b1 + Ts * gamma_sigma_hat),
+        # (A.17b)
+        sigma_2=num.sqrt(bar_2) * bracket,
+        sigma_3=num.sqrt(bar_3) * bracket,
         expm1_omega_Ts=em1_w,
         one_m_e2lam=one_m_e2lam,
         one_m_e2omega=one_m_e2omega,
@@ -664,10 +554,16 @@ def upsilon1_prime(xi: Real, s: SamplingConstants) -> Real:
     )
 
 
+def _par_diffusion(xi: Real, s: SamplingConstants) -> Real:
+    """Delta_p^par + Delta_sigma^par (1 + xi^{1/2}): the matched-diffusion factor of (A.18b),
+    (A.19a) and (A.19b)."""
+    c = s.consts
+    return c.Delta_p_par + c.Delta_sigma_par * (1.0 + s.num.sqrt(xi))
+
+
 def upsilon2_prime(xi: Real, s: SamplingConstants) -> Real:
     """Upsilon'_2(xi; p, omega, Ts); implements (A.18b) of L1-DRAC."""
-    c = s.consts
-    return s.gamma_pp * (c.Delta_p_par + c.Delta_sigma_par * (1.0 + s.num.sqrt(s.num.const(xi))))
+    return s.gamma_pp * _par_diffusion(s.num.const(xi), s)
 
 
 def upsilon3_prime(xi: Real, s: SamplingConstants) -> Real:
@@ -681,8 +577,8 @@ def upsilon_minus_tilde(xi: Real, s: SamplingConstants) -> Real:
     num = s.num
     xi = num.const(xi)
     fp1 = frak_p_prime(s.p, num)
-    diff = c.Delta_p_par + c.Delta_sigma_par * (1.0 + num.sqrt(xi))
-    inner = num.sqrt(s.omega) * fp1 * num.sqrt(s.one_m_e2omega) * diff + c.Delta_mu_par * (1.0 + xi)
+    par = _par_diffusion(xi, s)
+    inner = num.sqrt(s.omega) * fp1 * num.sqrt(s.one_m_e2omega) * par + c.Delta_mu_par * (1.0 + xi)
     return s.one_m_e2lam * c.Delta_g * inner / c.lam
 
 
@@ -692,8 +588,9 @@ def upsilon_minus(xi: Real, s: SamplingConstants) -> Real:
     num = s.num
     xi = num.const(xi)
     fp1 = frak_p_prime(s.p, num)
-    diff = c.Delta_p_par + c.Delta_sigma_par * (1.0 + num.sqrt(xi))
-    return s.gamma_1p * (2.0 * fp1 * diff + c.Delta_mu_par * (1.0 + xi) / num.sqrt(s.omega))
+    return s.gamma_1p * (
+        2.0 * fp1 * _par_diffusion(xi, s) + c.Delta_mu_par * (1.0 + xi) / num.sqrt(s.omega)
+    )
 
 
 def upsilon_ring(xi: Real, c: L1Constants, p: int, omega: Real) -> Real:
@@ -704,232 +601,3 @@ def upsilon_ring(xi: Real, c: L1Constants, p: int, omega: Real) -> Real:
     return c.Delta_g**2 * (
         fp1 * (c.L_p_par + c.L_sigma_par) * num.sqrt(xi) + c.L_mu_par * xi / num.sqrt(omega)
     )
-
-
-# --------------------------------------------------------------------------------------------
-# Sec. 3.2: Gamma_r, Gamma_a (18b, c), Theta_r, Theta_a (22, 23), Upsilon_a (25a-c)
-# --------------------------------------------------------------------------------------------
-
-
-def _abs_gap(lam: Real, omega: Real) -> Real:
-    """|2 lambda - omega| (the caller guarantees omega != 2 lambda)."""
-    return abs(2.0 * lam - omega)
-
-
-def gamma_r(rho_r: Real, omega: Real, rc: RefConstants) -> Real:
-    """Gamma_r(rho_r, p, omega); implements (18b) of L1-DRAC.
-
-    Parameters
-    ----------
-    rho_r
-        The reference-process radius varrho_r(p) >= 0.
-    omega
-        Filter bandwidth, ``omega != 2 lambda``.
-    rc
-        :func:`reference_constants` at the same p.
-    """
-    num = rc.num
-    rho_r, omega = num.const(rho_r), num.const(omega)
-    lam = rc.lam
-    w = omega / _abs_gap(lam, omega)
-    sl = num.sqrt(lam)
-    r = rho_r + rc.Delta_star
-    sr = num.sqrt(r)
-    return (
-        rc.circ_1 / (2 * lam)
-        + w * rc.circ_4
-        + (rc.ocirc_1 / (2 * lam) + w * rc.ocirc_4) * sr
-        + (rc.odot_1 / (2 * lam) + w * rc.odot_8) * r
-        + (rc.odot_2 / (2 * lam) + rc.odot_3 / (2 * sl) + rc.oast_1 * rc.Delta_star / (2 * lam))
-        * rho_r
-        + rc.otimes_1 / (2 * sl) * (r * sr)
-    )
-
-
-def gamma_a(rho_a: Real, omega: Real, tc: TrueConstants) -> Real:
-    """Gamma_a(rho_a, p, omega); implements (18c) of L1-DRAC."""
-    num = tc.num
-    rho_a, omega = num.const(rho_a), num.const(omega)
-    lam = tc.lam
-    return (
-        tc.odot_1 / (2 * lam)
-        + omega * tc.odot_4 / _abs_gap(lam, omega)
-        + tc.otimes_1 / (2 * num.sqrt(lam)) * num.sqrt(rho_a)
-    ) * rho_a
-
-
-def theta_r(rho_r: Real, omega: Real, rc: RefConstants) -> Real:
-    """Theta_r(rho_r, p, omega); implements (22) of L1-DRAC (NOT divided by |2 lambda - omega|)."""
-    num = rc.num
-    rho_r, omega = num.const(rho_r), num.const(omega)
-    sw = num.sqrt(omega)
-    r = rho_r + rc.Delta_star
-    sr = num.sqrt(r)
-    return (
-        rc.circ_2
-        + sw * rc.circ_3
-        + (rc.ocirc_2 + sw * rc.ocirc_3) * sr
-        + (rc.odot_4 + sw * rc.odot_6) * r
-        + (rc.odot_5 + sw * rc.odot_7) * rho_r
-        + ((rc.otimes_2 + sw * rc.otimes_4) * r + (rc.otimes_3 + sw * rc.otimes_5) * rho_r) * sr
-        + (rc.oast_2 * r + rc.oast_3 * rho_r) * r
-    )
-
-
-def theta_a(rho_a: Real, rho_r: Real, omega: Real, tc: TrueConstants, Delta_star: Real) -> Real:
-    """Theta_a(rho_a, rho_r, p, omega); implements (23) of L1-DRAC (NOT divided by |2lambda-omega|).
-
-    ``rho'' = rho_a + 2 (rho_r + Delta_star)`` as defined below (23).
-    """
-    num = tc.num
-    rho_a, rho_r, omega = num.const(rho_a), num.const(rho_r), num.const(omega)
-    sw = num.sqrt(omega)
-    rpp = rho_a + 2.0 * (rho_r + Delta_star)
-    return (
-        sw * tc.ocirc_1 + sw * tc.otimes_3 * rpp + (tc.otimes_2 + sw * tc.otimes_4) * rho_a
-    ) * num.sqrt(rho_a) + (tc.odot_2 + sw * tc.odot_3 + tc.oast_2 * rpp + tc.oast_3 * rho_a) * rho_a
-
-
-def upsilon_a1(xi1: Real, xi2: Real, s: SamplingConstants) -> Real:
-    """Upsilon_{a_1}(xi1, xi2; p, omega, Ts); implements (25a) of L1-DRAC."""
-    c = s.consts
-    lam = c.lam
-    xi2 = s.num.const(xi2)
-    ring = upsilon_ring(xi2, c, s.p, s.omega)
-    return upsilon_minus_tilde(xi1, s) * xi2 + s.omega / (
-        lam * _abs_gap(lam, s.omega)
-    ) * ring * upsilon_minus(xi1, s)
-
-
-def upsilon_a2(xi1: Real, xi2: Real, s: SamplingConstants) -> Real:
-    """Upsilon_{a_2}(xi1, xi2; p, omega, Ts); implements (25b) of L1-DRAC."""
-    c = s.consts
-    lam = c.lam
-    xi2 = s.num.const(xi2)
-    sw = s.num.sqrt(s.omega)
-    ring = upsilon_ring(xi2, c, s.p, s.omega)
-    return (
-        (c.Delta_g * xi2 + sw / _abs_gap(lam, s.omega) * ring)
-        * (upsilon1_prime(xi1, s) + sw * upsilon2_prime(xi1, s))
-        / lam
-    )
-
-
-def upsilon_a3(xi1: Real, xi2: Real, s: SamplingConstants) -> Real:
-    """Upsilon_{a_3}(xi1, xi2; p, omega, Ts); implements (25c) of L1-DRAC."""
-    c = s.consts
-    lam = c.lam
-    xi2 = s.num.const(xi2)
-    sw = s.num.sqrt(s.omega)
-    ring = upsilon_ring(xi2, c, s.p, s.omega)
-    return (
-        (2.0 * c.Delta_g * xi2 + sw / lam * ring) * upsilon3_prime(xi1, s) / _abs_gap(lam, s.omega)
-    )
-
-
-def upsilon_sum(xi1: Real, xi2: Real, s: SamplingConstants) -> Real:
-    """sum_{i=1}^3 Upsilon_{a_i}(xi1, xi2); the left side of (24) of L1-DRAC.
-
-    (24) evaluates it at ``xi1 = rho'(p) = rho_a + rho_r + Delta_star`` and ``xi2 = rho_a``.
-    """
-    return upsilon_a1(xi1, xi2, s) + upsilon_a2(xi1, xi2, s) + upsilon_a3(xi1, xi2, s)
-
-
-# --------------------------------------------------------------------------------------------
-# Sec. 3.2: the two sides of the design conditions (16a), (16b), (21a), (21b), (24)
-# --------------------------------------------------------------------------------------------
-
-#: Each condition in the paper's form ``lhs REL rhs`` (Sec. 3.2).
-RELATIONS: dict[str, str] = {"16a": ">=", "16b": ">=", "21a": "<", "21b": "<", "24": "<="}
-
-
-def margin_of(eq: str, lhs: Real, rhs: Real) -> Real:
-    """The signed margin of condition ``eq``, positive when it holds with room.
-
-    ``lhs - rhs`` for (16a, b) (``lhs >= rhs``); ``rhs - lhs`` for (21a, b) (``lhs < rhs``)
-    and (24) (``lhs <= rhs``).
-    """
-    return lhs - rhs if RELATIONS[eq] == ">=" else rhs - lhs
-
-
-def unmatched_gain_r(c: L1Constants) -> Real:
-    """k_r = Delta_g_perp Delta_mu_perp / lambda, in [0, 1) by Assumption 7; the factor of (16a)."""
-    return c.Delta_g_perp * c.Delta_mu_perp / c.lam
-
-
-def unmatched_gain_a(c: L1Constants) -> Real:
-    """k_a = Delta_g_perp L_mu_perp / lambda, in [0, 1) by Assumption 7; the factor of (16b)."""
-    return c.Delta_g_perp * c.L_mu_perp / c.lam
-
-
-def sides_16a(c: L1Constants, rc: RefConstants, omega: Real, rho_r: Real) -> tuple[Real, Real]:
-    """(16a): ``lhs = (1 - k_r) rho_r^2``, ``rhs = alpha^2 + Gamma_r(rho_r, p, omega) + eps_r``."""
-    rho_r = c.num.const(rho_r)
-    lhs = (1.0 - unmatched_gain_r(c)) * rho_r**2
-    rhs = c.alpha**2 + gamma_r(rho_r, omega, rc) + c.eps_r
-    return lhs, rhs
-
-
-def sides_16b(c: L1Constants, tc: TrueConstants, omega: Real, rho_a: Real) -> tuple[Real, Real]:
-    """(16b): ``lhs = (1 - k_a) rho_a^2``, ``rhs = Gamma_a(rho_a, p, omega) + eps_a``."""
-    rho_a = c.num.const(rho_a)
-    lhs = (1.0 - unmatched_gain_a(c)) * rho_a**2
-    rhs = gamma_a(rho_a, omega, tc) + c.eps_a
-    return lhs, rhs
-
-
-def sides_21a(c: L1Constants, rc: RefConstants, omega: Real, rho_r: Real) -> tuple[Real, Real]:
-    """(21a): ``lhs = Theta_r / |2 lambda - omega|``,
-    ``rhs = (1 - k_r) rho_r^2 - alpha^2 - Gamma_r``.
-
-    Theta_r is divided by |2 lambda - omega| exactly once (the authors' Julia code: twice).
-    """
-    rho_r, omega = c.num.const(rho_r), c.num.const(omega)
-    lhs = theta_r(rho_r, omega, rc) / _abs_gap(c.lam, omega)
-    rhs = (1.0 - unmatched_gain_r(c)) * rho_r**2 - c.alpha**2 - gamma_r(rho_r, omega, rc)
-    return lhs, rhs
-
-
-def budget_a(
-    c: L1Constants, tc: TrueConstants, omega: Real, rho_r: Real, rho_a: Real
-) -> tuple[Real, Real, Real]:
-    """``((1 - k_a) rho_a^2 - Gamma_a, Theta_a / |2 lambda - omega|, Gamma_a)``; (21b) and (24)."""
-    num = c.num
-    omega, rho_r, rho_a = num.const(omega), num.const(rho_r), num.const(rho_a)
-    ga = gamma_a(rho_a, omega, tc)
-    th = theta_a(rho_a, rho_r, omega, tc, c.Delta_star) / _abs_gap(c.lam, omega)
-    return (1.0 - unmatched_gain_a(c)) * rho_a**2 - ga, th, ga
-
-
-def sides_21b(
-    c: L1Constants, tc: TrueConstants, omega: Real, rho_r: Real, rho_a: Real
-) -> tuple[Real, Real]:
-    """(21b): ``lhs = Theta_a / |2 lambda - omega|``, ``rhs = (1 - k_a) rho_a^2 - Gamma_a``."""
-    rhs, lhs, _ = budget_a(c, tc, omega, rho_r, rho_a)
-    return lhs, rhs
-
-
-def sides_24(
-    c: L1Constants,
-    tc: TrueConstants,
-    p: int,
-    omega: Real,
-    lambda_s: Real,
-    Ts: Real,
-    rho_r: Real,
-    rho_a: Real,
-    *,
-    envelope: bool = False,
-) -> tuple[Real, Real]:
-    """(24): ``lhs = sum_i Upsilon_{a_i}(rho', rho_a)`` (25a-c), ``rhs = (1 - k_a) rho_a^2 -
-    Gamma_a - Theta_a / |2 lambda - omega|`` with ``rho' = rho_a + rho_r + Delta_star``.
-
-    ``envelope=True`` evaluates the left side on the monotone envelope of
-    :func:`sampling_constants` (the designer's Ts search).
-    """
-    num = c.num
-    rho_r, rho_a = num.const(rho_r), num.const(rho_a)
-    s = sampling_constants(c, p, omega, Ts, lambda_s, envelope=envelope)
-    lhs = upsilon_sum(rho_a + rho_r + c.Delta_star, rho_a, s)
-    b, th, _ = budget_a(c, tc, omega, rho_r, rho_a)
-    return lhs, b - th

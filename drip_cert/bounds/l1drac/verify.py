@@ -6,24 +6,28 @@ and Appendix A (the constants and maps they use).
 
 Why
 ---
-The designer's root searches (:mod:`drip_cert.bounds.l1drac`) return points on the boundary of a
-condition to a relative ``ROOT_RTOL``: there the float64 margin is a few units of rounding
-(1e-17 .. 1e-28 relative were seen), so its sign is a coin toss between two transcriptions. This
-module evaluates every condition in Arb ball arithmetic (python-flint) from the *same* float
-inputs, which are exact binary numbers, with the *same* code as the float path: the formulas of
-:mod:`drip_cert.bounds.l1drac_appendix` are generic over a numeric backend, and
-:class:`ArbConstants` hands them the Arb backend :data:`ARB`. Each margin (positive = holds,
-:func:`~drip_cert.bounds.l1drac_appendix.margin_of`) comes out as a ball that contains the exact
+The designer's root searches (:mod:`drip_cert.bounds.l1drac.searches`) return points on the
+boundary of a condition to a relative ``ROOT_RTOL``: there the float64 margin is a few units of
+rounding (1e-17 .. 1e-28 relative were seen), so its sign is a coin toss between two
+transcriptions. This module evaluates every condition in Arb ball arithmetic (python-flint) from
+the *same* float inputs, which are exact binary numbers, with the *same* code as the float path:
+the formulas of :mod:`drip_cert.bounds.l1drac.appendix` and :mod:`drip_cert.bounds.l1drac.sides`
+are generic over a numeric backend, and :class:`ArbConstants` hands them the Arb backend
+:data:`~drip_cert.bounds.l1drac.backend.ARB`. Each margin (positive = holds,
+:func:`~drip_cert.bounds.l1drac.sides.margin_of`) comes out as a ball that contains the exact
 real value; a condition is *verified* only when the ball's lower end is > 0, for the strict
 inequalities (21a, b) and the non-strict ones (16a, b), (24) alike.
 
 Public surface
 --------------
 * :data:`ARB_PREC` -- the working precision.
-* :class:`ArbOps`, :data:`ARB` -- the Arb backend of the appendix formulas.
-* :class:`ArbConstants` -- a read-only Arb view of an :class:`~drip_cert.bounds.l1drac.L1Constants`.
-* :func:`margin_balls` -- the margins as Arb balls.
-* :class:`ArbMargin`, :func:`verify_conditions` -- the margins as float enclosures + verdicts.
+* :data:`CONDITIONS` -- the five conditions, in the order the designer reports them.
+* :data:`VERIFY_METHOD` -- the provenance of a verdict obtained here.
+* :class:`ArbConstants` -- a read-only Arb view of an
+  :class:`~drip_cert.bounds.l1drac.constants.L1Constants`.
+* :class:`ArbMargin`, :func:`verify_conditions` -- the margins as Arb balls, their float
+  enclosures and the verdicts.
+* :func:`budget_24_lower` -- a rigorous lower bound of the right side of (24).
 """
 
 from __future__ import annotations
@@ -31,36 +35,30 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections.abc import Iterable
-from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from dataclasses import dataclass, field
 
 from flint import arb, ctx
 
-from drip_cert.bounds.l1drac_appendix import (
-    FloatOps,
-    Real,
-    budget_a,
+from drip_cert.bounds.l1drac.appendix import reference_constants, true_constants
+from drip_cert.bounds.l1drac.backend import ARB
+from drip_cert.bounds.l1drac.constants import L1Constants
+from drip_cert.bounds.l1drac.sides import (
+    budget_24,
     margin_of,
-    reference_constants,
     sides_16a,
     sides_16b,
     sides_21a,
     sides_21b,
     sides_24,
-    true_constants,
 )
-
-if TYPE_CHECKING:  # pragma: no cover
-    from drip_cert.bounds.l1drac import L1Constants
+from drip_cert.provenance import How
 
 __all__ = [
     "ARB_PREC",
     "CONDITIONS",
-    "ArbOps",
-    "ARB",
+    "VERIFY_METHOD",
     "ArbConstants",
     "ArbMargin",
-    "margin_balls",
     "verify_conditions",
     "budget_24_lower",
 ]
@@ -75,70 +73,20 @@ ARB_PREC = 128
 #: The five conditions of Sec. 3.2, in the order the designer reports them.
 CONDITIONS: tuple[str, ...] = ("16a", "16b", "21a", "21b", "24")
 
-
-class ArbOps(FloatOps):
-    """The Arb backend of :mod:`drip_cert.bounds.l1drac_appendix` (python-flint ``arb`` balls).
-
-    Same methods as :class:`~drip_cert.bounds.l1drac_appendix.FloatOps`; every result is a ball
-    that contains the exact value. Use inside ``flint.ctx.workprec`` (:func:`margin_balls` does).
-    """
-
-    name = "arb"
-    #: Terms of a series in x with |x| < 1e-2 (as in _phi2): the remainder x^20/22! < 1e-61
-    #: is far below the 128-bit rounding, so the series adds no visible width to the ball.
-    series_terms = 20
-
-    @staticmethod
-    def const(x: Real) -> arb:
-        """The exact ball of a float or an int (doubles and integers are exact in Arb)."""
-        return x if isinstance(x, arb) else arb(x)
-
-    @staticmethod
-    def sqrt(x: Real) -> arb:
-        """Square root (a NaN ball when the ball reaches below 0: never verified)."""
-        return ArbOps.const(x).sqrt()
-
-    @staticmethod
-    def exp(x: Real) -> arb:
-        """e^x."""
-        return ArbOps.const(x).exp()
-
-    @staticmethod
-    def expm1(x: Real) -> arb:
-        """e^x - 1 (no cancellation near 0)."""
-        return ArbOps.const(x).expm1()
-
-    @staticmethod
-    def max(a: Real, b: Real) -> arb:
-        """A ball containing max(a, b) for every a, b in the balls."""
-        return ArbOps.const(a).max(ArbOps.const(b))
-
-    @staticmethod
-    def mid(x: Real) -> float:
-        """The ball's midpoint as a float (only chooses between two valid formulas)."""
-        return float(ArbOps.const(x).mid())
-
-    @staticmethod
-    def series_remainder(total: Real, x: Real, n: int, denom: float) -> arb:
-        """``total`` widened by ``|x|^n / (denom (1 - |x|))``, the remainder of a series whose
-        k-th term (k >= n) is at most ``|x|^k / denom``; NaN when ``|x| >= 1`` is possible."""
-        xa = abs(ArbOps.const(x)).upper()
-        if not xa < 1:
-            return arb.nan()
-        bound = (xa**n / (arb(denom) * (1 - xa))).upper()
-        return ArbOps.const(total) + bound.union(-bound)
-
-
-#: The Arb backend.
-ARB = ArbOps()
+#: The method by which a design's verdict is obtained: every condition evaluated in Arb ball
+#: arithmetic from the exact float inputs ("verified in rigorous arithmetic" is How.EXACT in
+#: drip_cert.provenance). A design's label is weakest(VERIFY_METHOD, inputs): see
+#: drip_cert.bounds.l1drac.result.L1Design.label.
+VERIFY_METHOD = How.EXACT
 
 
 class ArbConstants:
-    """Read-only view of an :class:`~drip_cert.bounds.l1drac.L1Constants` for the Arb backend.
+    """Read-only view of an :class:`~drip_cert.bounds.l1drac.constants.L1Constants` in Arb.
 
     Every real field is the exact Arb ball of its float value; ``p_star``, ``m`` (ints) and
-    ``lip_f`` (bool) are unchanged; ``num`` is :data:`ARB`. The appendix formulas read only these
-    attributes, so the same code evaluates them in ball arithmetic.
+    ``lip_f`` (bool) are unchanged; ``num`` is :data:`~drip_cert.bounds.l1drac.backend.ARB`. The
+    appendix formulas read only these attributes, so the same code evaluates them in ball
+    arithmetic.
     """
 
     num = ARB
@@ -167,12 +115,15 @@ class ArbMargin:
     verified
         The ball's lower end is > 0: the condition holds at the given float inputs with a
         strictly positive margin, proved in rigorous arithmetic.
+    ball
+        The Arb ball itself (not compared, not printed).
     """
 
     eq: str
     lo: float
     hi: float
     verified: bool
+    ball: arb = field(compare=False, repr=False)
 
 
 def _down(x: arb) -> float:
@@ -193,11 +144,11 @@ def _up(x: arb) -> float:
 
 def _enclose(eq: str, m: arb) -> ArbMargin:
     if not m.is_finite():
-        return ArbMargin(eq, -math.inf, math.inf, False)
-    return ArbMargin(eq, _down(m.lower()), _up(m.upper()), bool(m > 0))
+        return ArbMargin(eq, -math.inf, math.inf, False, m)
+    return ArbMargin(eq, _down(m.lower()), _up(m.upper()), bool(m > 0), m)
 
 
-def margin_balls(
+def verify_conditions(
     c: L1Constants,
     p: int,
     omega: float,
@@ -208,15 +159,15 @@ def margin_balls(
     rho_a: float | None = None,
     which: Iterable[str] = CONDITIONS,
     prec: int = ARB_PREC,
-) -> dict[str, arb]:
-    """The margins of the conditions ``which`` as Arb balls, from the exact float inputs.
+) -> dict[str, ArbMargin]:
+    """Verify the conditions ``which`` at one design point in Arb ball arithmetic.
 
     Implements (16a), (16b), (21a), (21b) and (24) of L1-DRAC with the appendix maps (A.1)-(A.19)
     and (18b, c), (22), (23), (25a-c), through the same generic code as the float path. A
     condition whose parameters are missing (``None``) is skipped. The margin is
-    :func:`~drip_cert.bounds.l1drac_appendix.margin_of` (positive = holds). The caller checks
-    ``p``, ``omega != 2 lambda`` and positivity (:mod:`drip_cert.bounds.l1drac` does); a ball
-    that is not finite is never verified.
+    :func:`~drip_cert.bounds.l1drac.sides.margin_of` (positive = holds). The caller checks
+    ``p``, ``omega != 2 lambda`` and positivity (:mod:`drip_cert.bounds.l1drac.conditions`
+    does); a ball that is not finite is never verified.
 
     Parameters
     ----------
@@ -234,7 +185,9 @@ def margin_balls(
     Returns
     -------
     dict
-        ``eq -> arb`` for each evaluated condition.
+        ``eq -> ArbMargin`` for each evaluated condition: the margin ball, a float enclosure
+        ``[lo, hi]`` of the exact margin at the given float inputs, and ``verified`` = the
+        enclosure's lower end is > 0.
     """
     want = set(which)
     out: dict[str, arb] = {}
@@ -258,39 +211,7 @@ def margin_balls(
             if rr is not None and lambda_s is not None and Ts is not None and "24" in want:
                 lhs, rhs = sides_24(ac, tc, p, w, arb(lambda_s), arb(Ts), rr, ra)
                 out["24"] = margin_of("24", lhs, rhs)
-    return out
-
-
-def verify_conditions(
-    c: L1Constants,
-    p: int,
-    omega: float,
-    *,
-    lambda_s: float | None = None,
-    Ts: float | None = None,
-    rho_r: float | None = None,
-    rho_a: float | None = None,
-    which: Iterable[str] = CONDITIONS,
-    prec: int = ARB_PREC,
-) -> dict[str, ArbMargin]:
-    """Verify the conditions ``which`` at one design point in Arb ball arithmetic.
-
-    Same parameters as :func:`margin_balls`. Returns ``eq -> ArbMargin``: a float enclosure
-    ``[lo, hi]`` of the exact margin of (16a), (16b), (21a), (21b), (24) at the given float
-    inputs, and ``verified`` = the enclosure's lower end is > 0.
-    """
-    balls = margin_balls(
-        c,
-        p,
-        omega,
-        lambda_s=lambda_s,
-        Ts=Ts,
-        rho_r=rho_r,
-        rho_a=rho_a,
-        which=which,
-        prec=prec,
-    )
-    return {eq: _enclose(eq, m) for eq, m in balls.items()}
+    return {eq: _enclose(eq, m) for eq, m in out.items()}
 
 
 def budget_24_lower(
@@ -304,6 +225,5 @@ def budget_24_lower(
     """
     with ctx.workprec(prec):
         ac = ArbConstants(c)
-        b, th, _ = budget_a(ac, true_constants(ac, p), arb(omega), arb(rho_r), arb(rho_a))
-        m = b - th
+        m = budget_24(ac, true_constants(ac, p), arb(omega), arb(rho_r), arb(rho_a))
     return _down(m.lower()) if m.is_finite() else -math.inf

@@ -1,4 +1,5 @@
-"""Validation: every certified number against Monte-Carlo simulation of the true system.
+"""The empirical checks of a certificate, compared like with like.
+
 
 :func:`validate` simulates the four processes of the DRIP paper with
 :func:`drip_cert.sim.engine.simulate` and compares like with like:
@@ -39,46 +40,19 @@ The policy radius involves only the two nominal processes, which do not depend o
 from __future__ import annotations
 
 import math
-from dataclasses import replace
-from pathlib import Path
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field, replace
+from types import MappingProxyType
 from typing import Any
 
 import numpy as np
 
-from drip_cert.errors import SpecError
-from drip_cert.model.system import System
 from drip_cert.numerics import stats as _stats
-from drip_cert.spec.settings import SimSettings
-
-MAX_STEPS = 200_000  #: largest number of Euler steps per path accepted for a certified-T_s run
-SHORT_STEPS = 2_000  #: steps of the short-horizon run at the certified T_s (dt = T_s)
-SHORT_PATHS = 200  #: paths of the short-horizon run
-MIN_SIMULABLE_TS = 1e-9
-#: below this T_s an Euler step changes an O(1) state by less than ~1e-9 relative: with float64
-#: (eps 2.2e-16) the drift of one step keeps fewer than 7 digits, and below ~1e-15 it is lost
-#: entirely, so a run at such T_s says nothing about the certificate
 
 HOLDS = "holds"  #: a finite bound was compared and not violated at the stated confidence
 VIOLATED = "violated"  #: the one-sided lower confidence bound exceeds the bound
 NOT_CHECKED = "not_checked"  #: nothing was compared (the check's ``reason`` says why)
 NOTHING_CHECKED = "nothing_checked"  #: report status: no check holds and none is violated
-
-
-def x0_sampler(box) -> Any:
-    """Uniform initial law on the box ``D`` (jax key -> state)."""
-    from drip_cert._jax import jax, jnp
-
-    b = np.array(box, dtype=float)
-    lo, hi = jnp.asarray(b[:, 0]), jnp.asarray(b[:, 1])
-
-    def sample(key):
-        return jax.random.uniform(key, (b.shape[0],), minval=lo, maxval=hi, dtype=jnp.float64)
-
-    return sample
-
-
-# ----------------------------------------------------------------------------------------------
-# the checks: one statistic against one certified number, with a status
 
 
 def _bound_problem(bound: float | None, what: str = "bound") -> str | None:
@@ -117,6 +91,63 @@ def _ratio(bound: float | None, empirical: float | None) -> float | None:
     return math.inf if bound > 0 else None
 
 
+@dataclass(frozen=True)
+class EmpiricalCheck:
+    """One comparison of a certified number with its empirical counterpart.
+
+    ``bound`` is the certified number; ``empirical`` the statistic's point estimate;
+    ``confidence_low`` / ``confidence_high`` its one-sided confidence bounds in the units of
+    ``bound`` (the lower one decides ``violated``) at confidence ``level`` (familywise over the
+    recorded times for per-time checks); ``status`` is ``holds`` / ``violated`` /
+    ``not_checked``, ``reason`` says why a check is not checked; ``kind`` is ``radius``,
+    ``expectation``, ``moment``, ``tail`` or ``information``; ``extra`` holds the kind's own
+    values (``delta``, ``n``, ``n_unknown``, ``threshold``, ``time``, ``per_time_level``,
+    ``exceed_*``, ...).
+    """
+
+    name: str
+    kind: str
+    what: str
+    bound: float | None
+    empirical: float | None
+    confidence_low: float | None
+    confidence_high: float | None
+    level: float | None
+    status: str
+    reason: str | None
+    note: str
+    extra: Mapping[str, Any] = field(default_factory=lambda: MappingProxyType({}))
+
+    @property
+    def holds(self) -> bool:
+        """``status == "holds"``."""
+        return self.status == HOLDS
+
+    @property
+    def ratio(self) -> float | None:
+        """``bound / empirical`` when both are finite (``inf`` for an empirical zero)."""
+        return _ratio(self.bound, self.empirical)
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready: the fields, ``ratio`` and ``holds``, then the kind's own keys."""
+        return {
+            "name": self.name,
+            "kind": self.kind,
+            "what": self.what,
+            "bound": self.bound,
+            "empirical": self.empirical,
+            "confidence_low": self.confidence_low,
+            "confidence_high": self.confidence_high,
+            "level": self.level,
+            "ratio": self.ratio,
+            "status": self.status,
+            "holds": self.holds,
+            "reason": self.reason,
+            "note": self.note,
+            **self.extra,
+        }
+
+
 def _make(
     name: str,
     kind: str,
@@ -131,7 +162,7 @@ def _make(
     reason: str | None = None,
     note: str = "",
     **extra: Any,
-) -> dict[str, Any]:
+) -> EmpiricalCheck:
     """One check as a JSON-ready dict; ``status`` from ``reason`` / ``violated`` / the data.
 
     Precedence: a ``reason`` (no comparable bound, no valid data, inconclusive) gives
@@ -161,27 +192,25 @@ def _make(
         status = NOT_CHECKED
     else:
         status = VIOLATED if violated else HOLDS
-    return {
-        "name": name,
-        "kind": kind,
-        "what": what,
-        "bound": _num(bound),
-        "empirical": _num(empirical),
-        "confidence_low": _num(confidence_low),
-        "confidence_high": _num(confidence_high),
-        "level": _num(level),
-        "ratio": _ratio(bound, empirical),
-        "status": status,
-        "holds": status == HOLDS,
-        "reason": reason,
-        "note": note,
-        **extra,
-    }
+    return EmpiricalCheck(
+        name=name,
+        kind=kind,
+        what=what,
+        bound=_num(bound),
+        empirical=_num(empirical),
+        confidence_low=_num(confidence_low),
+        confidence_high=_num(confidence_high),
+        level=_num(level),
+        status=status,
+        reason=reason,
+        note=note,
+        extra=MappingProxyType(dict(extra)),
+    )
 
 
 def information(
     name: str, what: str, bound: float | None, empirical: float | None, why: str, **extra: Any
-) -> dict[str, Any]:
+) -> EmpiricalCheck:
     """A number reported beside a bound but NOT checked against it (status ``not_checked``)."""
     return _make(
         name,
@@ -207,7 +236,7 @@ def check_radius(
     n_total: int | None = None,
     what: str = "",
     note: str = "",
-) -> dict[str, Any]:
+) -> EmpiricalCheck:
     """A ``(1 - delta)`` radius against per-path maxima: ``P(max_t r_t > rho) <= delta``?
 
     Parameters
@@ -240,14 +269,14 @@ def check_radius(
     n = int(pm.size if n_total is None else n_total)
     known = pm[~np.isnan(pm)]
     unknown = n - known.size
-    common = {"delta": delta, "n": n, "n_unknown": unknown}
+    common: dict[str, Any] = {"delta": delta, "n": n, "n_unknown": unknown}
     reason = _bound_problem(rho, "radius") or _delta_problem(delta)
     if reason is None and known.size == 0:
         reason = "no valid paths (every path diverged or the data are NaN)"
     if reason is not None:
         q = (
             float(np.quantile(known, 1 - delta, method="inverted_cdf"))
-            if (known.size and _delta_problem(delta) is None)
+            if (known.size and delta is not None and _delta_problem(delta) is None)
             else None
         )
         return _make(
@@ -263,6 +292,7 @@ def check_radius(
             note=note,
             **common,
         )
+    assert rho is not None and delta is not None  # else a reason was returned above
     q_hat, q_low, q_high = _stats.upper_quantile_bounds(known, delta, level, n_total=n)
     k = int(np.sum(known > rho))
     ex_low = float(_stats.clopper_pearson_lower(k, n, level))
@@ -330,7 +360,7 @@ def check_tail(
     times: np.ndarray | None = None,
     what: str = "",
     note: str = "",
-) -> dict[str, Any]:
+) -> EmpiricalCheck:
     """A per-time tail claim ``P(r_t >= threshold) <= delta`` for every recorded ``t``.
 
     Parameters
@@ -357,7 +387,12 @@ def check_tail(
     n = int(n_valid if n_total is None else n_total)
     unknown = n - int(n_valid)
     m = max(1, c.size)
-    common = {"threshold": _num(threshold), "n": n, "n_unknown": unknown, "time": None}
+    common: dict[str, Any] = {
+        "threshold": _num(threshold),
+        "n": n,
+        "n_unknown": unknown,
+        "time": None,
+    }
     reason = _bound_problem(threshold, "threshold") or _delta_problem(delta)
     if reason is None and n_valid < 1:
         reason = "no valid paths (every path diverged)"
@@ -379,6 +414,7 @@ def check_tail(
             note=note,
             **common,
         )
+    assert delta is not None  # else a reason was returned above
     lvl = _stats.bonferroni_level(level, m)
     low = np.asarray(_stats.clopper_pearson_lower(c, n, lvl), dtype=np.float64)
     high = np.asarray(_stats.clopper_pearson_upper(c + unknown, n, lvl), dtype=np.float64)
@@ -415,7 +451,7 @@ def check_tail(
 def check_mean(
     name: str,
     s1: np.ndarray,
-    s2: np.ndarray,
+    s2: np.ndarray | None,
     n_valid: int,
     bound: float | None,
     level: float,
@@ -426,7 +462,7 @@ def check_mean(
     kind: str = "expectation",
     what: str = "",
     note: str = "",
-) -> dict[str, Any]:
+) -> EmpiricalCheck:
     """``sup_t (E Z_t)^{1/power} <= bound`` from ``s1 = sum Z_t``, ``s2 = sum Z_t^2``, ``Z >= 0``.
 
     ``power = 1`` compares a mean (``Z = r``); ``power = 2p`` with ``Z = r^{2p}`` compares the
@@ -443,7 +479,7 @@ def check_mean(
     n = int(n_valid if n_total is None else n_total)
     unknown = n - int(n_valid)
     m = max(1, a1.size)
-    common = {"n": n, "n_unknown": unknown, "time": None}
+    common: dict[str, Any] = {"n": n, "n_unknown": unknown, "time": None}
     with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
         point = (a1 / n_valid) ** (1.0 / power) if n_valid >= 1 else np.full(a1.shape, np.nan)
     emp, t_emp = _per_time(point, times)
@@ -501,9 +537,9 @@ def check_mean(
     )
 
 
-def overall_status(checks: list[dict[str, Any]]) -> str:
+def overall_status(checks: Sequence[EmpiricalCheck]) -> str:
     """``violated`` if any check is, else ``holds`` if at least one is, else ``nothing_checked``."""
-    statuses = [c["status"] for c in checks]
+    statuses = [c.status for c in checks]
     if VIOLATED in statuses:
         return VIOLATED
     if HOLDS in statuses:
@@ -511,20 +547,17 @@ def overall_status(checks: list[dict[str, Any]]) -> str:
     return NOTHING_CHECKED
 
 
-def _not_at_certified(check: dict[str, Any], why: str) -> dict[str, Any]:
+def _not_at_certified(check: EmpiricalCheck, why: str) -> EmpiricalCheck:
     """Demote a check made away from the certified L1-DRAC parameters to ``not_checked``."""
-    out = dict(check)
     label = f"not at certified parameters ({why})" if why else "not at certified parameters"
-    if out["status"] == NOT_CHECKED:
-        out["reason"] = f"{out['reason']}; {label}"
+    if check.status == NOT_CHECKED:
+        reason = f"{check.reason}; {label}"
         tail = "not at certified parameters"
     else:
-        out["reason"] = label
-        tail = f"not at certified parameters: there the comparison gives '{out['status']}'"
-    out["note"] = (out["note"] + "; " if out["note"] else "") + tail
-    out["status"] = NOT_CHECKED
-    out["holds"] = False
-    return out
+        reason = label
+        tail = f"not at certified parameters: there the comparison gives '{check.status}'"
+    note = (check.note + "; " if check.note else "") + tail
+    return replace(check, status=NOT_CHECKED, reason=reason, note=note)
 
 
 def _index(values: tuple[float, ...], x: float | None) -> int | None:
@@ -549,13 +582,13 @@ def checks_from_result(
     not_certified_why: str = "",
     policy: bool = True,
     with_l1: bool = True,
-) -> list[dict[str, Any]]:
+) -> list[EmpiricalCheck]:
     """The validation checks of one simulation result against the certified numbers.
 
     Parameters
     ----------
     res
-        A :class:`~drip_cert.sim.engine.SimResult` (or an object with ``gap(name)``,
+        A :class:`~drip_cert.sim.result.SimResult` (or an object with ``gap(name)``,
         ``n_paths_done`` and ``config.ci_level``).
     rho_tasil, delta_tasil
         ``rho_TaSIL`` and its probability: ``P[max_t ||x'_t - x*_t|| > rho] <= delta``.
@@ -581,7 +614,7 @@ def checks_from_result(
     """
     level = float(res.config.ci_level)
     n_total = int(res.n_paths_done)
-    out: list[dict[str, Any]] = []
+    out: list[EmpiricalCheck] = []
     if policy:
         pol = res.gap("policy")
         out.append(
@@ -613,8 +646,8 @@ def checks_from_result(
         )
     unc = res.gap("uncertainty_l1" if with_l1 else "uncertainty_true")
     tot = res.gap("total_l1" if with_l1 else "total_true")
-    l1_checks: list[dict[str, Any]] = []
-    common = {"n_total": n_total, "times": unc.times}
+    l1_checks: list[EmpiricalCheck] = []
+    common: dict[str, Any] = {"n_total": n_total, "times": unc.times}
     l1_checks.append(
         check_mean(
             "uncertainty_gap",
@@ -702,6 +735,8 @@ def checks_from_result(
         or _delta_problem(delta_l1, "delta_L1")
     )
     if reason is None:
+        assert rho_tasil is not None and kappa is not None  # checked by _bound_problem
+        assert delta_tasil is not None and delta_l1 is not None  # checked by _delta_problem
         thr = float(rho_tasil) + float(kappa)
         dsum = float(delta_tasil) + float(delta_l1)
         reason = _delta_problem(dsum, "delta_TaSIL + delta_L1")
@@ -758,304 +793,3 @@ def checks_from_result(
         )
     )
     return out
-
-
-def run_scenarios(
-    s: System,
-    *,
-    paths: int,
-    seed: int,
-    dt: float,
-    T: float,
-    l1_params: Any,
-    chunk_size: int,
-    record_every: int,
-    kappas: tuple[float, ...] = (),
-    p_max: int = 4,
-    w2_times: tuple[float, ...] = (),
-    run_dir: Path | None = None,
-    progress: bool = False,
-):
-    """Simulate the four scenarios of the DRIP paper for ``s`` (with its learned policy)."""
-    from drip_cert.sim.engine import SimConfig, simulate
-
-    cfg = SimConfig(
-        T=T,
-        dt=dt,
-        n_paths=paths,
-        seed=seed,
-        chunk_size=min(chunk_size, paths),
-        l1=l1_params,
-        record_every=record_every,
-        kappas=kappas,
-        p_max=p_max,
-        w2_times=w2_times,
-        w2_points=min(2000, max(2, paths // 2)),
-    )
-    return simulate(s.sim_model(), cfg, x0_sampler(s.support), run_dir=run_dir, progress=progress)
-
-
-def validate(
-    s: System,
-    cert: Any,
-    sim: SimSettings,
-    *,
-    paths: int,
-    seed: int,
-    practical_ts: float | None = None,
-    horizon: float | None = None,
-    progress: bool = False,
-    run_dir: Path | None = None,
-) -> dict[str, Any]:
-    """Validate certificate ``cert`` of ``s`` (which must have a learned policy) by simulation.
-
-    Returns
-    -------
-    dict
-        JSON-ready report: ``status`` (``holds`` / ``violated`` / ``nothing_checked``, over the
-        main and the short-horizon checks), ``holds`` (``status == "holds"``), ``counts`` (checks
-        per status), ``checks``, ``certificate``, ``empirical``, ``at_certified_parameters``,
-        ``horizon`` and ``certified_horizon``, ``short_horizon_at_certified_parameters``,
-        ``l1_parameters``, ``diverged_fraction``, ``simulation``, ``notes`` and ``_result``
-        (the :class:`~drip_cert.sim.engine.SimResult`, not JSON).
-    """
-    from drip_cert.control.l1drac import L1Params
-
-    if s.learned is None:
-        raise SpecError(
-            "validation needs a learned policy (policy.learned, or train one with "
-            "`drip-cert train`)",
-            field="policy.learned",
-        )
-    T = float(horizon or s.horizon)
-    notes: list[str] = []
-    design = cert.l1.design if (cert.l1 is not None and cert.l1.feasible) else None
-    at_cert = False
-    if design is not None:
-        k = max(1, math.ceil(design.Ts / sim.dt))
-        n_steps = math.floor(T / design.Ts) * k
-        if 1 <= n_steps <= MAX_STEPS:
-            at_cert = True
-            dt = design.Ts / k
-            # the grid must hit the horizon: simulate the largest multiple of T_s within T
-            T = math.floor(T / design.Ts) * design.Ts
-            params = L1Params(design.omega, design.lambda_s, design.Ts, dt)
-        else:
-            notes.append(
-                f"the certified T_s = {design.Ts:.3g} s needs {n_steps:.3g} Euler steps per path "
-                f"over T = {T:g} s (limit {MAX_STEPS}): simulated at a practical T_s instead; "
-                "these results are NOT a validation of the certificate"
-            )
-    if not at_cert:
-        ts = practical_ts or sim.Ts
-        dt = min(sim.dt, ts)
-        dt = ts / max(1, round(ts / dt))
-        params = L1Params(sim.omega, sim.lambda_s, ts, dt)
-        if design is None:
-            notes.append(
-                "no feasible L1-DRAC design is certified: the L1 run uses practical "
-                "parameters and no uncertainty bound is checked"
-            )
-    rho_tasil = cert.rho_tasil
-    delta_tasil = cert.tasil.delta if cert.tasil is not None else None
-    rho_l1 = cert.rho_l1
-    p = design.p if design is not None else 1
-    kappa = design.kappa if design is not None else None
-    delta_l1 = design.delta if design is not None else None
-    why = "no feasible L1-DRAC design" if design is None else "practical T_s, see the notes"
-    kappas = _thresholds(kappa, rho_tasil)
-    record_every = max(1, int(round(T / dt)) // 200)
-    while int(round(T / dt)) % record_every:
-        record_every -= 1
-    res = run_scenarios(
-        s,
-        paths=paths,
-        seed=seed,
-        dt=dt,
-        T=T,
-        l1_params=params,
-        chunk_size=sim.chunk_size,
-        record_every=record_every,
-        kappas=kappas,
-        p_max=max(4, 2 * p),  # E r^{4p} gives the variance of r^{2p} for the L_2p check
-        w2_times=(T,),
-        run_dir=run_dir,
-        progress=progress,
-    )
-    checks = checks_from_result(
-        res,
-        rho_tasil=rho_tasil,
-        delta_tasil=delta_tasil,
-        rho_l1=rho_l1,
-        p=p,
-        kappa=kappa,
-        delta_l1=delta_l1,
-        at_certified_l1=at_cert,
-        not_certified_why=why,
-    )
-    if T < s.horizon:
-        cause = (
-            "horizon shortened"
-            if horizon is not None and horizon < s.horizon
-            else "the largest multiple of the certified T_s"
-        )
-        notes.append(
-            f"simulated horizon [0, {T:.6g}] s ends {s.horizon - T:.3g} s before the certified "
-            f"T = {s.horizon:g} s ({cause}): the checks cover these times only (a violation "
-            "found is still one)"
-        )
-    short = None
-    if design is not None and not at_cert:
-        if design.Ts >= MIN_SIMULABLE_TS:
-            t_short = SHORT_STEPS * design.Ts
-            sres = run_scenarios(
-                s,
-                paths=SHORT_PATHS,
-                seed=seed,
-                dt=design.Ts,
-                T=t_short,
-                l1_params=L1Params(design.omega, design.lambda_s, design.Ts, design.Ts),
-                chunk_size=SHORT_PATHS,
-                record_every=SHORT_STEPS // 100,
-                kappas=kappas,
-                p_max=max(4, 2 * p),
-            )
-            short = {
-                "horizon": t_short,
-                "paths": SHORT_PATHS,
-                "checks": checks_from_result(
-                    sres,
-                    rho_tasil=rho_tasil,
-                    delta_tasil=delta_tasil,
-                    rho_l1=rho_l1,
-                    p=p,
-                    kappa=kappa,
-                    delta_l1=delta_l1,
-                    policy=False,
-                ),
-                "note": f"short horizon [0, {t_short:.3g}] s at the certified parameters",
-            }
-            short["status"] = overall_status(short["checks"])
-        else:
-            notes.append(
-                f"no short-horizon run at the certified T_s = {design.Ts:.3g} s either: "
-                f"below {MIN_SIMULABLE_TS:g} s an Euler step is lost in float64 rounding"
-            )
-    emp = {}
-    for key, gap in (
-        ("tig_max", "total_l1"),
-        ("policy_ig_max", "policy"),
-        ("uncertainty_ig_max", "uncertainty_l1"),
-        ("tig_max_without_l1", "total_true"),
-    ):
-        g = res.gap(gap)
-        emp[key] = {
-            "value": g.max_mean,
-            "ci_low": g.max_ci_low,
-            "ci_high": g.max_ci_high,
-            "argmax_time": g.argmax_time,
-        }
-    emp["w2"] = [w.to_dict() for w in res.w2]
-    notes.append(
-        "W2 estimates from samples are biased upward (see the same-law baselines "
-        "beside each); they are reported, not checked against a bound"
-    )
-    every = checks + (short["checks"] if short is not None else [])
-    status = overall_status(every)
-    if status == NOTHING_CHECKED:
-        notes.insert(
-            0,
-            "nothing was checked: no finite certified bound could be compared at certified "
-            "parameters (see each check's reason)",
-        )
-    return {
-        "status": status,
-        "holds": status == HOLDS,
-        "counts": {
-            st: sum(c["status"] == st for c in every) for st in (HOLDS, VIOLATED, NOT_CHECKED)
-        },
-        "certificate": cert.to_dict(),
-        "empirical": emp,
-        "checks": checks,
-        "at_certified_parameters": at_cert,
-        "horizon": T,
-        "certified_horizon": float(s.horizon),
-        "short_horizon_at_certified_parameters": short,
-        "l1_parameters": {
-            "omega": params.omega,
-            "lambda_s": params.lambda_s,
-            "Ts": params.Ts,
-            "dt": params.dt,
-        },
-        "diverged_fraction": {st.name: st.diverged_fraction for st in res.status},
-        "simulation": res.to_dict(),
-        "notes": notes,
-        "_result": res,
-    }
-
-
-def _thresholds(kappa: float | None, rho_tasil: float | None) -> tuple[float, ...]:
-    """Tail thresholds to simulate: ``kappa`` and ``rho_TaSIL + kappa`` where finite."""
-    out: list[float] = []
-    if kappa is not None and math.isfinite(kappa) and kappa > 0:
-        out.append(float(kappa))
-        if rho_tasil is not None and math.isfinite(rho_tasil) and rho_tasil >= 0:
-            out.append(float(rho_tasil) + float(kappa))
-    return tuple(dict.fromkeys(out))
-
-
-def validate_spec(
-    spec_path: str | Path,
-    *,
-    trajectories: int = 1000,
-    seed: int = 0,
-    out: str | Path | None = None,
-    practical_ts: float | None = None,
-    quick: bool = False,
-    progress: bool = False,
-) -> dict[str, Any]:
-    """``drip-cert validate``: certify the spec's system and validate it by simulation.
-
-    A spec without a learned policy gets one trained by TaSIL with its ``[tasil]`` settings.
-    """
-    from drip_cert.bounds.certificate import certify
-    from drip_cert.learn.imitation import train_on_system
-    from drip_cert.spec import load_spec
-
-    spec = load_spec(spec_path)
-    s = spec.system
-    notes = []
-    if s.learned is None:
-        st = spec.settings.tasil
-        if quick:
-            st = replace(st, steps=min(st.steps, 300))
-        tp = train_on_system(s, st, progress=progress)
-        s = tp.system
-        notes.append(
-            f"no learned policy in the spec: trained {st.method} ({st.steps} steps, "
-            f"{st.trajectories} trajectories, seed {st.seed})"
-        )
-        spec = spec.with_system(s)
-    cert = certify(spec)
-    sim = spec.settings.simulation
-    paths = min(trajectories, 200) if quick else trajectories
-    horizon = min(s.horizon, 2.0) if quick else None
-    rep = validate(
-        s,
-        cert,
-        sim,
-        paths=paths,
-        seed=seed,
-        practical_ts=practical_ts,
-        horizon=horizon,
-        progress=progress,
-    )
-    rep["notes"] = notes + rep["notes"]
-    res = rep.pop("_result")
-    if out is not None:
-        out = Path(out)
-        res.save(out / "simulation")
-        from drip_cert.numerics.atomic_io import atomic_write_json
-
-        atomic_write_json(out / "validation.json", rep)
-    return rep

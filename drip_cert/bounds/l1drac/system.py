@@ -1,6 +1,6 @@
-"""L1-DRAC for a :class:`~drip_cert.system.System`: the constants a system determines plus the
-user's design inputs (spec table ``[l1drac]``), then the designer of
-:mod:`drip_cert.bounds.l1drac`.
+"""L1-DRAC for a :class:`~drip_cert.model.system.System`: the constants a system determines plus
+the user's design inputs (spec table ``[l1drac]``), then the designer of
+:mod:`drip_cert.bounds.l1drac.designer`.
 
 System-determined constants (with provenance): ``lambda`` (contraction rate of the closed loop
 under the learned policy, the nominal system of DRIP's L1-DRAC layer; the expert's when no learned
@@ -23,6 +23,10 @@ from typing import Any
 
 import numpy as np
 
+from drip_cert.bounds.l1drac.constants import L1Constants
+from drip_cert.bounds.l1drac.designer import TradeoffRow, design, tradeoff_table
+from drip_cert.bounds.l1drac.request import DesignRequest
+from drip_cert.bounds.l1drac.result import L1Design
 from drip_cert.errors import AssumptionViolation
 from drip_cert.model.system import System
 from drip_cert.numerics.rounding import norm2_up, up_np
@@ -37,9 +41,9 @@ class L1Section:
     """The L1-DRAC part of a certificate: constants used, the design, or why there is none."""
 
     constants: Mapping[str, Quantity]
-    design: Any | None  # drip_cert.bounds.l1drac.L1Design
+    design: L1Design | None
     error: str = ""
-    tradeoff: tuple = ()  #: (rho_a, Ts_max, rho) rows at the design's omega and lambda_s
+    tradeoff: tuple[TradeoffRow, ...] = ()  #: rows at the design's omega and lambda_s
 
     @property
     def feasible(self) -> bool:
@@ -82,7 +86,6 @@ def l1_section(
         Input-operator and uncertainty quantities by name.
     """
     from drip_cert.analysis.closed_loop import closed_loop_constants
-    from drip_cert.bounds.l1drac import DesignRequest, L1Constants, design
 
     st = settings
     q: dict[str, Quantity] = {}
@@ -162,7 +165,6 @@ def l1_section(
             + "; give them in [constants]",
         )
     values = {k: v.value for k, v in q.items()}
-    values["lambda"] = values.pop("lambda")
     values.update(p_star=st.p_star, m=s.m, lip_f=bool(lip_f))
     if not lip_f:
         values["L_f"] = 0.0
@@ -180,9 +182,7 @@ def l1_section(
         delta=st.delta,
     )
     d = design(consts, req)
-    rows: tuple = ()
+    rows: tuple[TradeoffRow, ...] = ()
     if d.feasible:
-        from drip_cert.bounds.l1drac import tradeoff_table
-
-        rows = tuple(tradeoff_table(consts, d.p, d.omega, d.lambda_s))
+        rows = tradeoff_table(consts, d.p, d.omega, d.lambda_s)
     return L1Section(q, d, tradeoff=rows)

@@ -1,0 +1,335 @@
+"""The L1-DRAC design conditions (16a), (16b), (21a), (21b), (24), each with its verdict.
+
+Source: A. Gahlawat, S. H. Karumanchi, N. Hovakimyan, "L1-DRAC: Distributionally Robust Adaptive
+Control -- Global Results", arXiv:2509.04619 (2025-09-04), Sec. 3.2. The two sides of each
+condition are :mod:`drip_cert.bounds.l1drac.sides`; this module compares them in float64 (the
+searches' oracle) and attaches the Arb-verified margin of :mod:`drip_cert.bounds.l1drac.verify`.
+
+Public surface
+--------------
+* :class:`ConditionResult` -- one condition in the paper's form, with a signed float margin and
+  its Arb-verified enclosure.
+* :func:`condition_16a`, :func:`condition_16b`, :func:`condition_21a`, :func:`condition_21b`,
+  :func:`condition_24` -- one condition at one point.
+* :func:`evaluate_conditions` -- all five at a fully specified point.
+
+The argument checks (:func:`check_p`, :func:`check_omega`, :func:`check_Ts`), the float64
+conditions on precomputed constants (:func:`float_16a` ... :func:`float_24`,
+:func:`float_conditions`) and :func:`with_arb_margins` are shared with the searches, the back-off
+and the designer.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+from typing import Any
+
+from drip_cert.bounds.l1drac.appendix import (
+    RefConstants,
+    TrueConstants,
+    reference_constants,
+    true_constants,
+)
+from drip_cert.bounds.l1drac.constants import L1Constants, check_int, is_real
+from drip_cert.bounds.l1drac.sides import (
+    RELATIONS,
+    margin_of,
+    sides_16a,
+    sides_16b,
+    sides_21a,
+    sides_21b,
+    sides_24,
+)
+from drip_cert.bounds.l1drac.verify import CONDITIONS, verify_conditions
+from drip_cert.errors import SpecError
+from drip_cert.provenance import json_float
+
+__all__ = [
+    "ConditionResult",
+    "condition_16a",
+    "condition_16b",
+    "condition_21a",
+    "condition_21b",
+    "condition_24",
+    "evaluate_conditions",
+]
+
+#: e^{x} overflows float64 beyond x = 709.78; omega*Ts and lambda_s*Ts are kept below this.
+EXP_ARG_MAX = 700.0
+
+
+@dataclass(frozen=True)
+class ConditionResult:
+    """One condition of L1-DRAC Sec. 3.2 in the paper's form ``lhs REL rhs``.
+
+    ``lhs``, ``rhs``, ``margin`` and ``holds`` are the float64 evaluation: ``margin`` is signed,
+    positive = satisfied: ``lhs - rhs`` for (16a, b) (``lhs >= rhs``), ``rhs - lhs`` for (21a, b)
+    (``lhs < rhs``, strict) and (24) (``lhs <= rhs``); ``holds`` is the float comparison.
+
+    ``verified``, ``margin_lo`` and ``margin_hi`` are the rigorous evaluation of the same margin
+    in Arb ball arithmetic (:func:`drip_cert.bounds.l1drac.verify.verify_conditions`):
+    ``[margin_lo, margin_hi]`` encloses the exact margin at the float inputs (lower end rounded
+    down, upper end rounded up), and ``verified`` is ``margin_lo > 0`` (the ball's lower end is
+    > 0). Only a verified condition counts for
+    :attr:`drip_cert.bounds.l1drac.result.L1Design.feasible`. Results of the internal float-only
+    searches carry ``verified=False`` and NaN ends.
+    """
+
+    eq: str
+    lhs: float
+    rhs: float
+    margin: float
+    holds: bool
+    relation: str = ""
+    verified: bool = False
+    margin_lo: float = math.nan
+    margin_hi: float = math.nan
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready dictionary: eq, lhs, rhs, margin, holds, relation, verified, margin_lo,
+        margin_hi."""
+        return {
+            "eq": self.eq,
+            "lhs": json_float(self.lhs),
+            "rhs": json_float(self.rhs),
+            "margin": json_float(self.margin),
+            "holds": bool(self.holds),
+            "relation": self.relation,
+            "verified": bool(self.verified),
+            "margin_lo": json_float(self.margin_lo),
+            "margin_hi": json_float(self.margin_hi),
+        }
+
+
+def _result(eq: str, lhs: float, rhs: float) -> ConditionResult:
+    relation = RELATIONS[eq]
+    margin = margin_of(eq, lhs, rhs)
+    if relation == ">=":
+        holds = lhs >= rhs
+    elif relation == "<":
+        holds = lhs < rhs
+    else:  # "<="
+        holds = lhs <= rhs
+    if math.isnan(margin):
+        holds = False
+    return ConditionResult(eq, lhs, rhs, margin, bool(holds), relation)
+
+
+# --------------------------------------------------------------------------------------------
+# Argument checks
+# --------------------------------------------------------------------------------------------
+
+
+def check_omega(c: L1Constants, omega: float) -> None:
+    """SpecError unless omega is a finite number > 0 other than 2 lambda."""
+    if not (is_real(omega) and math.isfinite(omega) and omega > 0):
+        raise SpecError(f"{omega!r} must be a finite number > 0", field="omega")
+    if omega == 2.0 * c.lam:
+        raise SpecError(
+            f"omega = {omega!r} equals 2*lambda: every bandwidth term of (18b), (18c), (21) and "
+            "(24) divides by |2 lambda - omega|, which is zero there; choose another omega",
+            field="omega",
+        )
+
+
+def check_p(c: L1Constants, p: Any) -> int:
+    """p as an int in ``{1, ..., p_star}`` (SpecError otherwise)."""
+    p = check_int("p", p, where="moment order", path=None)
+    if p > c.p_star:
+        raise SpecError(
+            f"p = {p} exceeds p_star = {c.p_star}: the constants of Appendix A need the 2p-th "
+            "moment bound Delta_star of Assumption 3; use p <= p_star",
+            field="p",
+        )
+    return p
+
+
+def check_Ts(c: L1Constants, omega: float, lambda_s: float, Ts: float) -> None:
+    """SpecError unless lambda_s and Ts are finite numbers > 0 with no overflow of e^{x Ts}."""
+    for name, v in (("lambda_s", lambda_s), ("Ts", Ts)):
+        if not (is_real(v) and math.isfinite(v) and v > 0):
+            raise SpecError(f"{v!r} must be a finite number > 0", field=name)
+    if max(omega, lambda_s, 2.0 * c.lam) * Ts > EXP_ARG_MAX:
+        raise SpecError(
+            f"Ts = {Ts!r} is so long that e^(max(omega, lambda_s, 2 lambda) Ts) overflows; such a "
+            "sampling period can never satisfy (24): use a Ts several orders smaller",
+            field="Ts",
+        )
+
+
+# --------------------------------------------------------------------------------------------
+# The float64 conditions on precomputed constants (the searches' oracle): the two sides come
+# from the generic transcription of :mod:`drip_cert.bounds.l1drac.sides` (the Arb verifier
+# evaluates the same code).
+# --------------------------------------------------------------------------------------------
+
+
+def float_16a(c: L1Constants, rc: RefConstants, omega: float, rho_r: float) -> ConditionResult:
+    """(16a) in float64."""
+    return _result("16a", *sides_16a(c, rc, omega, rho_r))
+
+
+def float_16b(c: L1Constants, tc: TrueConstants, omega: float, rho_a: float) -> ConditionResult:
+    """(16b) in float64."""
+    return _result("16b", *sides_16b(c, tc, omega, rho_a))
+
+
+def float_21a(c: L1Constants, rc: RefConstants, omega: float, rho_r: float) -> ConditionResult:
+    """(21a) in float64; Theta_r is divided by |2 lambda - omega| exactly once (the authors'
+    Julia code: twice)."""
+    return _result("21a", *sides_21a(c, rc, omega, rho_r))
+
+
+def float_21b(
+    c: L1Constants, tc: TrueConstants, omega: float, rho_r: float, rho_a: float
+) -> ConditionResult:
+    """(21b) in float64."""
+    return _result("21b", *sides_21b(c, tc, omega, rho_r, rho_a))
+
+
+def float_24(
+    c: L1Constants,
+    tc: TrueConstants,
+    p: int,
+    omega: float,
+    lambda_s: float,
+    Ts: float,
+    rho_r: float,
+    rho_a: float,
+    *,
+    envelope: bool = False,
+) -> ConditionResult:
+    """(24) in float64 (on the monotone envelope of (A.13)-(A.17) when ``envelope``)."""
+    return _result("24", *sides_24(c, tc, p, omega, lambda_s, Ts, rho_r, rho_a, envelope=envelope))
+
+
+def float_conditions(
+    c: L1Constants,
+    rc: RefConstants,
+    tc: TrueConstants,
+    p: int,
+    omega: float,
+    which: tuple[str, ...],
+    *,
+    rho_r: float | None = None,
+    rho_a: float | None = None,
+    lambda_s: float | None = None,
+    Ts: float | None = None,
+) -> tuple[ConditionResult, ...]:
+    """The float64 results of the conditions ``which``, in that order, at one point."""
+    make = {
+        "16a": lambda: float_16a(c, rc, omega, rho_r),
+        "21a": lambda: float_21a(c, rc, omega, rho_r),
+        "16b": lambda: float_16b(c, tc, omega, rho_a),
+        "21b": lambda: float_21b(c, tc, omega, rho_r, rho_a),
+        "24": lambda: float_24(c, tc, p, omega, lambda_s, Ts, rho_r, rho_a),
+    }
+    return tuple(make[eq]() for eq in which)
+
+
+def with_arb_margins(
+    c: L1Constants,
+    p: int,
+    results: tuple[ConditionResult, ...],
+    omega: float,
+    **point: float | None,
+) -> tuple[ConditionResult, ...]:
+    """``results`` with their Arb-verified margins (one Arb evaluation for all of them).
+
+    ``point`` is the rest of the design point (``lambda_s``, ``Ts``, ``rho_r``, ``rho_a``) as
+    :func:`~drip_cert.bounds.l1drac.verify.verify_conditions` takes it.
+    """
+    v = verify_conditions(c, p, omega, which=tuple(r.eq for r in results), **point)
+    out = []
+    for r in results:
+        m = v[r.eq]
+        out.append(dataclasses.replace(r, verified=m.verified, margin_lo=m.lo, margin_hi=m.hi))
+    return tuple(out)
+
+
+# --------------------------------------------------------------------------------------------
+# The conditions at one point, checked and verified
+# --------------------------------------------------------------------------------------------
+
+
+def _evaluate(
+    c: L1Constants, p: int, which: tuple[str, ...], omega: float, **point: float | None
+) -> tuple[ConditionResult, ...]:
+    """The conditions ``which`` at one point: arguments checked, float64 verdicts, Arb margins."""
+    p = check_p(c, p)
+    check_omega(c, omega)
+    if "24" in which:
+        check_Ts(c, omega, point["lambda_s"], point["Ts"])
+    rc = reference_constants(c, p)
+    tc = true_constants(c, p)
+    floats = float_conditions(c, rc, tc, p, omega, which, **point)
+    return with_arb_margins(c, p, floats, omega, **point)
+
+
+def condition_16a(c: L1Constants, p: int, omega: float, rho_r: float) -> ConditionResult:
+    """(16a): ``(1 - Dgp Dmup / lambda) rho_r^2 >= alpha^2 + Gamma_r(rho_r, p, omega) + eps_r``.
+
+    Float64 verdict plus the Arb-verified margin (:class:`ConditionResult`).
+    """
+    return _evaluate(c, p, ("16a",), omega, rho_r=rho_r)[0]
+
+
+def condition_16b(c: L1Constants, p: int, omega: float, rho_a: float) -> ConditionResult:
+    """(16b): ``(1 - Dgp Lmup / lambda) rho_a^2 >= Gamma_a(rho_a, p, omega) + eps_a``.
+
+    Float64 verdict plus the Arb-verified margin (:class:`ConditionResult`).
+    """
+    return _evaluate(c, p, ("16b",), omega, rho_a=rho_a)[0]
+
+
+def condition_21a(c: L1Constants, p: int, omega: float, rho_r: float) -> ConditionResult:
+    """(21a): ``Theta_r / |2 lambda - omega| < (1 - k_r) rho_r^2 - alpha^2 - Gamma_r``.
+
+    Float64 verdict plus the Arb-verified margin (:class:`ConditionResult`).
+    """
+    return _evaluate(c, p, ("21a",), omega, rho_r=rho_r)[0]
+
+
+def condition_21b(
+    c: L1Constants, p: int, omega: float, rho_r: float, rho_a: float
+) -> ConditionResult:
+    """(21b): ``Theta_a / |2 lambda - omega| < (1 - Dgp Lmup / lambda) rho_a^2 - Gamma_a``.
+
+    Float64 verdict plus the Arb-verified margin (:class:`ConditionResult`).
+    """
+    return _evaluate(c, p, ("21b",), omega, rho_r=rho_r, rho_a=rho_a)[0]
+
+
+def condition_24(
+    c: L1Constants,
+    p: int,
+    omega: float,
+    lambda_s: float,
+    Ts: float,
+    rho_r: float,
+    rho_a: float,
+) -> ConditionResult:
+    """(24): ``sum_i Upsilon_{a_i}(rho', rho_a) <= (1 - k_a) rho_a^2 - Gamma_a - Theta_a/|2l - w|``.
+
+    ``rho' = rho_a + rho_r + Delta_star``; the Upsilon maps are (25a-c) with (A.13)-(A.19).
+    Float64 verdict plus the Arb-verified margin (:class:`ConditionResult`).
+    """
+    return _evaluate(c, p, ("24",), omega, lambda_s=lambda_s, Ts=Ts, rho_r=rho_r, rho_a=rho_a)[0]
+
+
+def evaluate_conditions(
+    c: L1Constants,
+    p: int,
+    omega: float,
+    lambda_s: float,
+    Ts: float,
+    rho_r: float,
+    rho_a: float,
+) -> tuple[ConditionResult, ...]:
+    """(16a), (16b), (21a), (21b), (24) at one fully specified point, in that order.
+
+    Each result carries the float64 verdict and the Arb-verified margin (:class:`ConditionResult`).
+    """
+    return _evaluate(c, p, CONDITIONS, omega, lambda_s=lambda_s, Ts=Ts, rho_r=rho_r, rho_a=rho_a)

@@ -1,0 +1,281 @@
+"""The three monotone root searches of the L1-DRAC designer: smallest rho_r, rho_a; largest Ts.
+
+Source: A. Gahlawat, S. H. Karumanchi, N. Hovakimyan, "L1-DRAC: Distributionally Robust Adaptive
+Control -- Global Results", arXiv:2509.04619 (2025-09-04), Sec. 3.2 (conditions (16), (21), (24)).
+
+How and to what tolerance
+-------------------------
+Each unknown is found by bisection in log space on a bracket ``[lo, hi]`` whose ``hi`` end always
+satisfies the condition and whose ``lo`` end never does; the search stops when
+``hi / lo - 1 <= ROOT_RTOL`` and returns ``hi`` (``lo`` for the largest Ts). The returned point was
+itself evaluated with the same function that the final re-check uses, so the certificate never
+rests on a point that fails its own re-check; it is minimal (maximal for Ts) to a relative
+``ROOT_RTOL``. Why bisection is correct: see :func:`smallest_rho_r`, :func:`smallest_rho_a` and
+:func:`largest_Ts`, which prove that each feasible set is an interval reaching to infinity (to
+zero for Ts).
+
+Public surface
+--------------
+* :data:`ROOT_RTOL` -- the relative tolerance of every search.
+* :func:`smallest_rho_r`, :func:`smallest_rho_a`, :func:`largest_Ts` -- the searches, arguments
+  checked.
+
+:func:`min_rho_r`, :func:`min_rho_a` and :func:`max_Ts` are the same searches on precomputed
+constants, unchecked (the designer's inner loops).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+
+from drip_cert.bounds.l1drac.appendix import (
+    RefConstants,
+    TrueConstants,
+    reference_constants,
+    sampling_constants,
+    true_constants,
+)
+from drip_cert.bounds.l1drac.conditions import (
+    EXP_ARG_MAX,
+    check_omega,
+    check_p,
+    check_Ts,
+    float_16a,
+    float_16b,
+    float_21a,
+    float_21b,
+    float_24,
+)
+from drip_cert.bounds.l1drac.constants import L1Constants
+from drip_cert.bounds.l1drac.sides import budget_24, upsilon_sum
+from drip_cert.errors import SpecError
+
+__all__ = ["ROOT_RTOL", "smallest_rho_r", "smallest_rho_a", "largest_Ts"]
+
+#: Relative tolerance of every root search (the returned root is within this of the true one).
+ROOT_RTOL = 1e-12
+#: Largest radius tried before a condition is declared infeasible for every rho.
+RHO_CAP = 1e60
+#: Smallest positive radius / sampling period tried.
+TINY = 1e-200
+
+
+def _smallest(ok: Callable[[float], bool], lo: float) -> float | None:
+    """Smallest x >= lo with ok(x), for an up-set {ok} = [x*, inf) or (x*, inf); None if > cap.
+
+    Doubling from ``lo`` brackets the root, then bisection in log space keeps ``ok(hi)`` True and
+    ``ok(lo)`` False until ``hi / lo - 1 <= ROOT_RTOL``; returns ``hi``.
+    """
+    if ok(lo):
+        return lo
+    hi = max(2.0 * lo, lo + TINY)
+    while not ok(hi):
+        lo = hi
+        hi *= 2.0
+        if hi > RHO_CAP:
+            return None
+    while hi / lo - 1.0 > ROOT_RTOL:
+        mid = math.sqrt(lo * hi)
+        if not lo < mid < hi:  # adjacent floats
+            break
+        if ok(mid):
+            hi = mid
+        else:
+            lo = mid
+    return hi
+
+
+def smallest_rho_r(
+    c: L1Constants, p: int, omega: float, which: tuple[str, ...] = ("16a", "21a")
+) -> float | None:
+    """The smallest rho_r satisfying (16a) and/or (21a) at (p, omega); None if none does.
+
+    Monotonicity (why bisection finds *the* smallest). Write ``x = rho_r > 0``,
+    ``k = Delta_g_perp Delta_mu_perp / lambda in (0, 1)`` (Assumption 7), ``D = Delta_star >= 0``.
+    (16a) holds iff ``psi(x) = (1 - k) - (alpha^2 + eps_r + Gamma_r(x)) / x^2 >= 0``. By (18b),
+    ``Gamma_r(x)`` is a non-negative combination of ``1, (x+D)^{1/2}, (x+D), x, (x+D)^{3/2}``, and
+    each of these divided by ``x^2`` is non-increasing in x (for ``(x+D)^q / x^2`` with ``q < 2``:
+    ``d/dx log = q/(x+D) - 2/x < 0``). Hence psi is non-decreasing, -> -inf as x -> 0
+    (``eps_r > 0``), -> 1 - k > 0 as x -> inf: the feasible set is ``[x*, inf)`` with a single
+    root x*. For (21a), ``x^2 psi`` is the rhs - lhs of (21a); (22) adds the non-negative terms
+    ``(x+D)^{1/2} x``, ``(x+D)^2`` and ``(x+D) x``, whose quotients by x^2,
+    ``(x+D)^{1/2}/x``, ``(1 + D/x)^2``, ``1 + D/x``, are non-increasing too; so again psi is
+    non-decreasing and the strict set ``{psi > 0}`` is an interval ``(x*, inf)``, non-empty iff
+    ``lim psi = 1 - k - (Delta^r_oast2 + Delta^r_oast3) / |2 lambda - omega| > 0``.
+    Checked on grids in tests/test_l1drac_design.py.
+
+    The lower end of the bracket is ``sqrt((alpha^2 + eps_r) / (1 - k))`` (below it (16a) fails
+    because Gamma_r >= 0) for (16a), and ``max(alpha / sqrt(1-k), 1e-200)`` for (21a) alone.
+    """
+    p = check_p(c, p)
+    check_omega(c, omega)
+    return min_rho_r(c, reference_constants(c, p), omega, which)
+
+
+def min_rho_r(
+    c: L1Constants, rc: RefConstants, omega: float, which: tuple[str, ...]
+) -> float | None:
+    """:func:`smallest_rho_r` on precomputed constants, arguments unchecked."""
+    out = 0.0
+    if "16a" in which:
+        lo = math.sqrt((c.alpha**2 + c.eps_r) / (1.0 - c.k_r))
+        r = _smallest(lambda x: float_16a(c, rc, omega, x).holds, lo)
+        if r is None:
+            return None
+        out = max(out, r)
+    if "21a" in which:
+        lo = max(c.alpha / math.sqrt(1.0 - c.k_r), TINY)
+        lo = max(lo, out)  # the joint set is an up-set: start at the (16a) root when known
+        r = _smallest(lambda x: float_21a(c, rc, omega, x).holds, lo)
+        if r is None:
+            return None
+        out = max(out, r)
+    return out
+
+
+def smallest_rho_a(
+    c: L1Constants,
+    p: int,
+    omega: float,
+    rho_r: float,
+    *,
+    lambda_s: float | None = None,
+    Ts: float | None = None,
+    which: tuple[str, ...] = ("16b", "21b", "24"),
+) -> float | None:
+    """The smallest rho_a satisfying (16b), (21b) and, when Ts is given, (24); None if none does.
+
+    Monotonicity. With ``y = rho_a``, ``k = Delta_g_perp L_mu_perp / lambda in (0, 1)``:
+    (16b) is ``psi(y) = (1-k) - Delta_odot1/(2 lambda y) - omega Delta_odot4/(|2l-w| y)
+    - Delta_otimes1/(2 sqrt(lambda) sqrt(y)) - eps_a / y^2 >= 0`` with psi increasing, -> -inf at
+    0, -> 1 - k > 0 at inf: one root. (21b): (23) is a non-negative combination of ``y^{1/2}``,
+    ``rho'' y^{1/2}``, ``y^{3/2}``, ``y``, ``rho'' y``, ``y^2`` with ``rho'' = y + 2(rho_r + D)``;
+    divided by y^2 each is non-increasing, so (rhs - lhs)/y^2 is non-decreasing and the feasible
+    set is an interval (y*, inf). (24) at fixed Ts: with ``xi1 = y + rho_r + D``, ``xi2 = y``,
+    every term of (25a-c) is a non-negative multiple of ``xi2^a xi1^b`` with ``a in {1/2, 1}``,
+    ``b in {0, 1/4, 1/2, 1}`` and ``a + b <= 2`` (ring-Upsilon is ``O(xi2^{1/2} + xi2)``, the
+    primed maps are ``O(1 + xi1^{1/4} + xi1^{1/2} + xi1)``), and
+    ``xi2^a xi1^b / y^2 = y^{a-2} (y + rho_r + D)^b`` is non-increasing in y when
+    ``a + b <= 2`` (log-derivative ``(a-2)/y + b/(y + r) <= (a + b - 2)/y <= 0``). So
+    ``(rhs - lhs)/y^2`` of (24) is non-decreasing too: an interval [y*, inf).
+    The joint set is the intersection of up-sets, an up-set: its left end is the largest root.
+    """
+    p = check_p(c, p)
+    check_omega(c, omega)
+    if Ts is not None:
+        if lambda_s is None:
+            raise SpecError("lambda_s is needed to evaluate (24) at a given Ts", field="lambda_s")
+        check_Ts(c, omega, lambda_s, Ts)
+    return min_rho_a(c, true_constants(c, p), p, omega, rho_r, lambda_s, Ts, which)
+
+
+def min_rho_a(
+    c: L1Constants,
+    tc: TrueConstants,
+    p: int,
+    omega: float,
+    rho_r: float,
+    lambda_s: float | None,
+    Ts: float | None,
+    which: tuple[str, ...],
+) -> float | None:
+    """:func:`smallest_rho_a` on precomputed constants, arguments unchecked."""
+    out = TINY
+    if "16b" in which:
+        lo = math.sqrt(c.eps_a / (1.0 - c.k_a))
+        r = _smallest(lambda y: float_16b(c, tc, omega, y).holds, lo)
+        if r is None:
+            return None
+        out = max(out, r)
+    if "21b" in which:
+        r = _smallest(lambda y: float_21b(c, tc, omega, rho_r, y).holds, out)
+        if r is None:
+            return None
+        out = max(out, r)
+    if "24" in which and Ts is not None and lambda_s is not None:
+        r = _smallest(
+            lambda y: float_24(c, tc, p, omega, lambda_s, Ts, rho_r, y).holds,
+            out,
+        )
+        if r is None:
+            return None
+        out = max(out, r)
+    return out
+
+
+def largest_Ts(
+    c: L1Constants, p: int, omega: float, lambda_s: float, rho_r: float, rho_a: float
+) -> float | None:
+    """The largest Ts for which the monotone envelope of (24) holds; None if (24) cannot hold.
+
+    The paper's left side of (24) is *not* monotone in Ts for every parameter value: gamma_2
+    (A.13b) decreases in Ts when omega < lambda_s, and the factors ``Ts e^{-lambda_s Ts}`` and
+    ``Ts gamma_1(Ts) e^{-lambda_s Ts}`` of (A.15) rise and then fall. We therefore search on the
+    *envelope* (``sampling_constants(..., envelope=True)``): ``e^{-lambda_s Ts} -> 1`` in (A.15),
+    ``gamma_2 -> max(gamma_2, 1)``. Proof that the envelope's left side is non-decreasing in Ts:
+    it is a sum of products of non-negative factors, each non-decreasing in Ts -- ``Ts``,
+    ``sqrt(Ts)``, ``1 - e^{-x Ts}``, ``e^{omega Ts} - 1``; ``Ts gamma_1(Ts)`` (with
+    ``u = lambda_s Ts``, ``(Ts gamma_1)^2 = u^2 coth(u/2) / lambda_s`` and
+    ``d/du [u^2 coth(u/2)] = u (sinh u - u/2) / sinh^2(u/2) > 0``); ``max(gamma_2, 1)``
+    (equal to 1 when omega < lambda_s; when omega >= lambda_s, ``(e^{a T}-1)/(e^{b T}-1)``
+    increases for a >= b because ``a / (1 - e^{-a T})`` increases in a, and
+    ``e^{(omega - lambda_s) Ts}`` increases);
+    gamma'_2 (both arguments of its max are ``1 - (decreasing)`` or ``(increasing) - 1`` around
+    the value 1 at Ts = 0); gamma'_1 and the square roots of these. The right side does not
+    depend on Ts. So the feasible set of the envelope is an interval ``(0, T*]`` and bisection
+    finds T*. Because the envelope bounds the paper's left side from above, (24) itself holds at
+    the returned Ts (re-checked in :func:`~drip_cert.bounds.l1drac.designer.design`); the true
+    largest Ts can be larger by a relative ``O(lambda_s Ts)``, negligible in the regime (24)
+    forces (Ts << 1/lambda_s).
+
+    The bracket starts at ``T_cap = min(1e3, 700 / max(omega, lambda_s, 2 lambda))`` (returned
+    as is when (24) holds there) and shrinks by 10 until feasible, down to 1e-200.
+    """
+    p = check_p(c, p)
+    check_omega(c, omega)
+    check_Ts(c, omega, lambda_s, 1e-12 / max(omega, lambda_s, 1.0))
+    return max_Ts(c, true_constants(c, p), p, omega, lambda_s, rho_r, rho_a)
+
+
+def max_Ts(
+    c: L1Constants,
+    tc: TrueConstants,
+    p: int,
+    omega: float,
+    lambda_s: float,
+    rho_r: float,
+    rho_a: float,
+    budget: float | None = None,
+) -> float | None:
+    """:func:`largest_Ts` on precomputed constants, arguments unchecked; ``budget`` replaces
+    the float64 right side of (24) when given (the back-off passes its rigorous lower bound)."""
+    if budget is None:
+        budget = budget_24(c, tc, omega, rho_r, rho_a)
+    if not budget > 0.0:
+        return None
+    xi1 = rho_a + rho_r + c.Delta_star
+
+    def env_ok(T: float) -> bool:
+        s = sampling_constants(c, p, omega, T, lambda_s, envelope=True)
+        return upsilon_sum(xi1, rho_a, s) <= budget
+
+    t_cap = min(1e3, EXP_ARG_MAX / max(omega, lambda_s, 2.0 * c.lam))
+    if env_ok(t_cap):
+        return t_cap
+    hi = t_cap
+    lo = t_cap / 10.0
+    while not env_ok(lo):
+        hi = lo
+        lo /= 10.0
+        if lo < TINY:
+            return None
+    while hi / lo - 1.0 > ROOT_RTOL:
+        mid = math.sqrt(lo * hi)
+        if not lo < mid < hi:
+            break
+        if env_ok(mid):
+            lo = mid
+        else:
+            hi = mid
+    return lo

@@ -1,0 +1,330 @@
+"""The jitted kernel: one batch of paths of every scenario, a block of recorded times per call.
+
+Discretisation: Euler-Maruyama with step ``dt`` for the SDEs and explicit Euler with the SAME
+``dt`` for the nominal ODEs (:mod:`drip_cert.sim.engine` explains why). Time-major: one
+``lax.scan`` over the ``record_every`` steps between two recorded times with the whole batch in
+the carry, nested in a scan over ``records_per_call`` recorded times. A batch is simulated by one
+call of :meth:`CompiledChunk.start` (initial states, codes and L1-DRAC states) and
+``n_calls`` calls of :meth:`CompiledChunk.advance`, each returning its block of recorded states;
+between two calls the host may report progress. The carry stays on the device, and every call
+runs the same step on the same numbers, so the split into calls changes no bit.
+
+Randomness: path ``i`` draws its initial states from ``fold_in(k_x0, i)`` (and
+``fold_in(k_x0bar, i)``) and its Brownian increments from the counter-based
+:func:`drip_cert.sim.noise.normals` under ``k_bm``, with ``k_* = fold_in(PRNGKey(seed), const)``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from drip_cert._jax import jax, jnp
+from drip_cert.control.l1drac import L1State, l1_init, l1_step
+from drip_cert.errors import SpecError
+from drip_cert.model.numeric import SimModel
+from drip_cert.sim.config import STATUS_CAP, STATUS_NONFINITE, STATUS_OK, SimConfig
+from drip_cert.sim.noise import normals
+
+__all__ = ["ChunkKernel", "CompiledChunk", "build_chunk_fn"]
+
+MIN_CALL_PATH_STEPS = 1 << 18
+"""Least work of one kernel call, in path-steps of all scenarios together. A call costs up to
+about 0.25 ms of dispatch and synchronisation (measured on the 4-D benchmark system, 2000 paths,
+100 calls against 1); 2^18 path-steps take about 60 ms at the engine's 4.4e6 path-steps/s on
+that system, so the calls cost under 0.5 % of a run while a long chunk still reports its
+progress many times."""
+
+_TRUE_SCENARIOS = ("learned_true", "learned_l1_true")
+
+# Theta_ad and the step counter of L1-DRAC depend on time only: one copy for the whole batch
+_SHARED = L1State(x_hat=0, eta=0, lam_hat=0, theta=None, step=None)
+
+
+def build_chunk_fn(
+    model: SimModel,
+    config: SimConfig,
+    x0_sampler: Callable,
+    x0_bar_sampler: Callable | None = None,
+) -> ChunkKernel:
+    """The kernel of ``config``'s scenarios on ``model``: ``idx (B,) uint32 -> (records, codes)``.
+
+    ``records`` has shape ``(n_records, n_scenarios, B, n)`` (states on the recorded grid, frozen
+    after divergence) and ``codes`` ``(n_scenarios, B)`` (status codes). The seed is a traced
+    argument and the settings that do not shape the simulation are normalised away, so runs that
+    differ only in them reuse one compiled program.
+
+    Raises
+    ------
+    SpecError
+        When a scenario needs the learned policy the model lacks, or ``n_steps * d`` overflows
+        the 32-bit noise counter.
+    """
+    if model.learned is None and any(s != "expert_nominal" for s in config.scenarios):
+        raise SpecError(
+            "the model has no learned policy; simulate only 'expert_nominal' or give one",
+            field="SimModel.learned",
+        )
+    if config.n_steps * model.d >= 2**32:
+        raise SpecError(
+            f"n_steps * d = {config.n_steps * model.d} exceeds the 32-bit noise counter; "
+            "shorten T or enlarge dt",
+            field="SimConfig.dt",
+        )
+    static = dataclasses.replace(
+        config,
+        seed=0,
+        n_paths=1,
+        chunk_size=1,
+        n_sample_paths=0,
+        p_max=1,
+        kappas=(),
+        w2_times=(),
+        w2_points=1,
+        ci_level=0.95,
+    )
+    return ChunkKernel(
+        key=jax.random.PRNGKey(config.seed),
+        model=_ByIdentity(model),
+        config=static,
+        samplers=(_ByIdentity(x0_sampler), _ByIdentity(x0_bar_sampler)),
+    )
+
+
+@dataclass(frozen=True, eq=False)
+class ChunkKernel:
+    """The kernel of one run's settings, not yet compiled for a batch size.
+
+    Attributes
+    ----------
+    key
+        ``PRNGKey(seed)``, a traced argument of every call.
+    model, config, samplers
+        Static arguments of the jitted functions: the model, the config with the settings that do
+        not shape the simulation normalised away, and the two initial samplers (the model and
+        the samplers wrapped so that they compare by identity).
+    """
+
+    key: Any
+    model: _ByIdentity
+    config: SimConfig
+    samplers: tuple[_ByIdentity, _ByIdentity]
+
+    def records_per_call(self, batch: int) -> int:
+        """Recorded times per :meth:`CompiledChunk.advance` call for ``batch`` paths.
+
+        The smallest divisor of ``n_records - 1`` whose calls do at least
+        :data:`MIN_CALL_PATH_STEPS` path-steps (all of them in one call when none does): every
+        call has the same length, so one program serves them all.
+        """
+        cfg = self.config
+        n_out = cfg.n_records - 1
+        per_record = cfg.record_every * batch * len(cfg.scenarios)
+        for k in range(1, n_out + 1):
+            if n_out % k == 0 and k * per_record >= MIN_CALL_PATH_STEPS:
+                return k
+        return n_out
+
+    def compile(self, batch: int) -> CompiledChunk:
+        """Compile both programs for batches of ``batch`` paths (ahead of time)."""
+        k = self.records_per_call(batch)
+        idx = jax.ShapeDtypeStruct((batch,), jnp.uint32)
+        start = _start_jit.lower(
+            self.key, idx, model=self.model, config=self.config, samplers=self.samplers
+        ).compile()
+        carry = start.out_info[0]  # shapes and dtypes of the carry
+        r0 = jax.ShapeDtypeStruct((), jnp.uint32)
+        advance = _advance_jit.lower(
+            self.key, carry, r0, model=self.model, config=self.config, records_per_call=k
+        ).compile()
+        return CompiledChunk(self.key, start, advance, k, (self.config.n_records - 1) // k)
+
+    def __call__(self, idx) -> tuple[jax.Array, jax.Array]:
+        """Compile for ``idx.shape[0]`` paths and simulate them (see :func:`build_chunk_fn`)."""
+        recs, codes = self.compile(idx.shape[0])(idx)
+        return jnp.concatenate(recs, axis=0), codes
+
+
+@dataclass(frozen=True, eq=False)
+class CompiledChunk:
+    """The kernel compiled for one batch size.
+
+    Attributes
+    ----------
+    key
+        ``PRNGKey(seed)``.
+    start
+        ``(key, idx) -> (carry, records0)``: initial states (recorded at ``t = 0``), codes and
+        L1-DRAC states.
+    advance
+        ``(key, carry, r0) -> (carry, records)``: the states at the ``records_per_call`` recorded
+        times after record ``r0``.
+    records_per_call, n_calls
+        Their product is ``n_records - 1``.
+    """
+
+    key: Any
+    start: Callable
+    advance: Callable
+    records_per_call: int
+    n_calls: int
+
+    def __call__(
+        self, idx, on_block: Callable[[int], None] | None = None
+    ) -> tuple[list[jax.Array], jax.Array]:
+        """Simulate the paths ``idx``; return the record blocks (in time order) and the codes.
+
+        ``on_block(k)`` is called after each finished call with its ``k`` recorded times. One
+        call is dispatched ahead of the one waited for, so the device never idles on the host.
+        """
+        carry, rec0 = self.start(self.key, idx)
+        blocks = [rec0]
+        for c in range(self.n_calls):
+            carry, recs = self.advance(self.key, carry, np.uint32(c * self.records_per_call))
+            if on_block is not None and c:
+                jax.block_until_ready(blocks[-1])  # the previous call, this one queued behind it
+                on_block(self.records_per_call)
+            blocks.append(recs)
+        if on_block is not None:
+            jax.block_until_ready(blocks[-1])
+            on_block(self.records_per_call)
+        return blocks, jnp.stack(carry[1])
+
+
+class _ByIdentity:
+    """Static-argument wrapper hashed and compared by the identity of what it holds.
+
+    jit caches compiled programs by static arguments; user callables need not be hashable,
+    and the same model object must hit the cache.
+    """
+
+    __slots__ = ("obj",)
+
+    def __init__(self, obj) -> None:
+        self.obj = obj
+
+    def __hash__(self) -> int:
+        return id(self.obj)
+
+    def __eq__(self, other) -> bool:
+        return isinstance(other, _ByIdentity) and other.obj is self.obj
+
+
+def _guard(x_old, x_new, code, inv_cap: float):
+    """Freeze the paths whose new state is non-finite or beyond the cap; update their codes."""
+    nonfinite = ~jnp.all(jnp.isfinite(x_new), axis=-1)
+    scaled = x_new * inv_cap  # ||x|| > cap without overflowing the square
+    capped = jnp.sum(scaled * scaled, axis=-1) > 1.0
+    new_code = jnp.where(
+        code != STATUS_OK,
+        code,
+        jnp.where(nonfinite, STATUS_NONFINITE, jnp.where(capped, STATUS_CAP, STATUS_OK)),
+    )
+    frozen = new_code != STATUS_OK
+    return jnp.where(frozen[:, None], x_old, x_new), new_code.astype(code.dtype)
+
+
+def _start_impl(key, idx, *, model, config, samplers):
+    """Initial carry ``(states, codes, L1 states, idx)`` and the records at ``t = 0``."""
+    model = model.obj
+    x0_sampler, x0_bar_sampler = (w.obj for w in samplers)
+    scen = config.scenarios
+    inv_cap = 1.0 / config.divergence_cap
+    k_x0 = jax.random.fold_in(key, 0)
+    k_x0bar = jax.random.fold_in(key, 1)
+    x0 = jax.vmap(lambda i: x0_sampler(jax.random.fold_in(k_x0, i)))(idx)
+    if x0_bar_sampler is not None:
+        x0b = jax.vmap(lambda i: x0_bar_sampler(jax.random.fold_in(k_x0bar, i)))(idx)
+    else:
+        x0b = x0
+    x0 = x0.astype(jnp.float64)
+    x0b = x0b.astype(jnp.float64)
+    xs = tuple(x0b if s in _TRUE_SCENARIOS else x0 for s in scen)
+    zero = jnp.zeros(idx.shape, dtype=jnp.int8)
+    # a non-finite or too large initial state is a divergence at t = 0
+    codes = tuple(_guard(x, x, zero, inv_cap)[1] for x in xs)
+    l1s = None
+    if "learned_l1_true" in scen:
+        l1s = jax.vmap(l1_init, in_axes=(0, None), out_axes=_SHARED)(
+            x0b, model.theta_ad(jnp.float64(0.0))
+        )
+    return (xs, codes, l1s, idx), jnp.stack(xs)[None]
+
+
+def _advance_impl(key, carry, r0, *, model, config, records_per_call):
+    """Records ``r0 + 1 .. r0 + records_per_call``: ``(carry, (records_per_call, S, B, n))``."""
+    model = model.obj
+    scen = config.scenarios
+    dt = config.dt
+    sqrt_dt = math.sqrt(dt)
+    inv_cap = 1.0 / config.divergence_cap
+    stride = config.record_every
+    l1p = config.l1
+    has_true = any(s in _TRUE_SCENARIOS for s in scen)
+    d = model.d
+    k_bm = jax.random.fold_in(key, 2)
+
+    f_b = jax.vmap(model.f, in_axes=(None, 0))
+    lam_mu_b = jax.vmap(model.lam_mu, in_axes=(None, 0))
+    diff_b = jax.vmap(lambda t, x: model.p(t, x) + model.lam_sigma(t, x), in_axes=(None, 0))
+    expert_b = jax.vmap(model.expert)
+    learned_b = jax.vmap(model.learned) if model.learned is not None else None
+    l1_b = (
+        jax.vmap(
+            lambda st, x, fk, g_t, th: l1_step(l1p, st, x, fk, g_t, th),
+            in_axes=(_SHARED, 0, 0, None, None),
+            out_axes=(0, _SHARED),
+        )
+        if l1p is not None
+        else None
+    )
+
+    def known_drift(t, x, g_t, policy_b):
+        # f(t,x) + g(t) pi(x), batched: (B, n)
+        return f_b(t, x) + policy_b(x) @ g_t.T
+
+    def step(carry, j):
+        xs, codes, l1s, idx = carry
+        t = j.astype(jnp.float64) * dt
+        g_t = model.g(t)
+        new_xs, new_codes = [], []
+        dw = None
+        if has_true:
+            dw = sqrt_dt * normals(k_bm, idx, j, d)
+        for i, s in enumerate(scen):
+            x = xs[i]
+            if s == "expert_nominal":
+                x_new = x + dt * known_drift(t, x, g_t, expert_b)
+            elif s == "learned_nominal":
+                x_new = x + dt * known_drift(t, x, g_t, learned_b)
+            elif s == "learned_true":
+                drift = known_drift(t, x, g_t, learned_b) + lam_mu_b(t, x)
+                noise = jnp.einsum("bnd,bd->bn", diff_b(t, x), dw)
+                x_new = x + dt * drift + noise
+            else:  # learned_l1_true
+                fk = known_drift(t, x, g_t, learned_b)
+                u, l1s = l1_b(l1s, x, fk, g_t, model.theta_ad(t))
+                drift = fk + u @ g_t.T + lam_mu_b(t, x)
+                noise = jnp.einsum("bnd,bd->bn", diff_b(t, x), dw)
+                x_new = x + dt * drift + noise
+            x_new, c_new = _guard(x, x_new, codes[i], inv_cap)
+            new_xs.append(x_new)
+            new_codes.append(c_new)
+        return (tuple(new_xs), tuple(new_codes), l1s, idx), None
+
+    def record_block(carry, r):
+        js = (r * stride + jnp.arange(stride)).astype(jnp.uint32)
+        carry, _ = jax.lax.scan(step, carry, js)
+        return carry, jnp.stack(carry[0])
+
+    rs = r0 + jnp.arange(records_per_call, dtype=jnp.uint32)
+    return jax.lax.scan(record_block, carry, rs)
+
+
+_start_jit = jax.jit(_start_impl, static_argnames=("model", "config", "samplers"))
+_advance_jit = jax.jit(_advance_impl, static_argnames=("model", "config", "records_per_call"))

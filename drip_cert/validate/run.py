@@ -1,0 +1,331 @@
+"""Validation of a certificate by Monte-Carlo simulation of the true system.
+
+:func:`validate` simulates the four processes of the DRIP paper for a system with its learned
+policy (:mod:`drip_cert.validate.scenarios`) and compares every certified number with its
+empirical counterpart (:mod:`drip_cert.validate.checks`, whose docstring states what is compared
+with what). The result is a typed, frozen :class:`ValidationReport`.
+
+When the certified ``T_s`` is too small to simulate (more than :data:`MAX_STEPS` steps), the run
+is made at a practical ``T_s`` and every check that involves the L1-DRAC parameters is
+``not_checked`` ("not at certified parameters"): such results never validate the certificate; a
+short run of :data:`SHORT_STEPS` steps at the certified ``T_s`` is added when it is simulable.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+from drip_cert.errors import SpecError
+from drip_cert.model.system import System
+from drip_cert.spec.settings import SimSettings
+from drip_cert.validate.checks import (
+    HOLDS,
+    NOT_CHECKED,
+    NOTHING_CHECKED,
+    VIOLATED,
+    EmpiricalCheck,
+    checks_from_result,
+    overall_status,
+)
+from drip_cert.validate.scenarios import (
+    MAX_STEPS,
+    MIN_SIMULABLE_TS,
+    SHORT_PATHS,
+    SHORT_STEPS,
+    run_scenarios,
+)
+
+__all__ = ["ShortHorizonRun", "ValidationReport", "validate"]
+
+
+@dataclass(frozen=True)
+class ShortHorizonRun:
+    """A short run at the certified L1-DRAC parameters (when the main run cannot be at them)."""
+
+    horizon: float
+    paths: int
+    checks: tuple[EmpiricalCheck, ...]
+    note: str
+
+    @property
+    def status(self) -> str:
+        """``violated`` / ``holds`` / ``nothing_checked`` over its checks."""
+        return overall_status(self.checks)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "horizon": self.horizon,
+            "paths": self.paths,
+            "checks": [c.to_dict() for c in self.checks],
+            "note": self.note,
+            "status": self.status,
+        }
+
+
+@dataclass(frozen=True)
+class ValidationReport:
+    """The validation of one certificate: checks, empirical gaps, notes and the simulation.
+
+    ``status`` is ``violated`` when a check (of the main or the short run) is violated, else
+    ``holds`` when at least one holds, else ``nothing_checked``; ``holds`` is
+    ``status == "holds"``. ``result`` is the :class:`~drip_cert.sim.result.SimResult` (not part
+    of :meth:`to_dict`; save it with ``result.save``).
+    """
+
+    checks: tuple[EmpiricalCheck, ...]
+    short_horizon: ShortHorizonRun | None
+    certificate: Any
+    empirical: Mapping[str, Any]
+    at_certified_parameters: bool
+    horizon: float
+    certified_horizon: float
+    l1_parameters: Mapping[str, float]
+    diverged_fraction: Mapping[str, float]
+    notes: tuple[str, ...]
+    result: Any = field(repr=False, compare=False)
+
+    @property
+    def all_checks(self) -> tuple[EmpiricalCheck, ...]:
+        """The main run's checks, then the short run's."""
+        return self.checks + (self.short_horizon.checks if self.short_horizon else ())
+
+    @property
+    def status(self) -> str:
+        return overall_status(self.all_checks)
+
+    @property
+    def holds(self) -> bool:
+        return self.status == HOLDS
+
+    @property
+    def counts(self) -> dict[str, int]:
+        """Number of checks per status (main and short run)."""
+        every = self.all_checks
+        return {st: sum(c.status == st for c in every) for st in (HOLDS, VIOLATED, NOT_CHECKED)}
+
+    def with_notes_before(self, notes: tuple[str, ...] | list[str]) -> ValidationReport:
+        """The same report with ``notes`` put before its own."""
+        return replace(self, notes=tuple(notes) + self.notes)
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready report (the keys of the ``validation.json`` file)."""
+        return {
+            "status": self.status,
+            "holds": self.holds,
+            "counts": self.counts,
+            "certificate": self.certificate.to_dict(),
+            "empirical": dict(self.empirical),
+            "checks": [c.to_dict() for c in self.checks],
+            "at_certified_parameters": self.at_certified_parameters,
+            "horizon": self.horizon,
+            "certified_horizon": self.certified_horizon,
+            "short_horizon_at_certified_parameters": (
+                None if self.short_horizon is None else self.short_horizon.to_dict()
+            ),
+            "l1_parameters": dict(self.l1_parameters),
+            "diverged_fraction": dict(self.diverged_fraction),
+            "simulation": self.result.to_dict(),
+            "notes": list(self.notes),
+        }
+
+
+def validate(
+    s: System,
+    cert: Any,
+    sim: SimSettings,
+    *,
+    paths: int,
+    seed: int,
+    practical_ts: float | None = None,
+    horizon: float | None = None,
+    progress: bool = False,
+    run_dir: Path | None = None,
+) -> ValidationReport:
+    """Validate certificate ``cert`` of ``s`` (which must have a learned policy) by simulation.
+
+    Returns
+    -------
+    ValidationReport
+        The checks of the main run and of the short-horizon run at the certified parameters
+        (when the main run is not at them), the empirical gaps, the notes and the simulation.
+    """
+    from drip_cert.control.l1drac import L1Params
+
+    if s.learned is None:
+        raise SpecError(
+            "validation needs a learned policy (policy.learned, or train one with "
+            "`drip-cert train`)",
+            field="policy.learned",
+        )
+    T = float(horizon or s.horizon)
+    notes: list[str] = []
+    design = cert.l1.design if (cert.l1 is not None and cert.l1.feasible) else None
+    at_cert = False
+    if design is not None:
+        k = max(1, math.ceil(design.Ts / sim.dt))
+        n_steps = math.floor(T / design.Ts) * k
+        if 1 <= n_steps <= MAX_STEPS:
+            at_cert = True
+            dt = design.Ts / k
+            # the grid must hit the horizon: simulate the largest multiple of T_s within T
+            T = math.floor(T / design.Ts) * design.Ts
+            params = L1Params(design.omega, design.lambda_s, design.Ts, dt)
+        else:
+            notes.append(
+                f"the certified T_s = {design.Ts:.3g} s needs {n_steps:.3g} Euler steps per path "
+                f"over T = {T:g} s (limit {MAX_STEPS}): simulated at a practical T_s instead; "
+                "these results are NOT a validation of the certificate"
+            )
+    if not at_cert:
+        ts = practical_ts or sim.Ts
+        dt = min(sim.dt, ts)
+        dt = ts / max(1, round(ts / dt))
+        params = L1Params(sim.omega, sim.lambda_s, ts, dt)
+        if design is None:
+            notes.append(
+                "no feasible L1-DRAC design is certified: the L1 run uses practical "
+                "parameters and no uncertainty bound is checked"
+            )
+    rho_tasil = cert.rho_tasil
+    delta_tasil = cert.tasil.delta if cert.tasil is not None else None
+    rho_l1 = cert.rho_l1
+    p = design.p if design is not None else 1
+    kappa = design.kappa if design is not None else None
+    delta_l1 = design.delta if design is not None else None
+    why = "no feasible L1-DRAC design" if design is None else "practical T_s, see the notes"
+    kappas = _thresholds(kappa, rho_tasil)
+    record_every = max(1, int(round(T / dt)) // 200)
+    while int(round(T / dt)) % record_every:
+        record_every -= 1
+    res = run_scenarios(
+        s,
+        paths=paths,
+        seed=seed,
+        dt=dt,
+        T=T,
+        l1_params=params,
+        chunk_size=sim.chunk_size,
+        record_every=record_every,
+        kappas=kappas,
+        p_max=max(4, 2 * p),  # E r^{4p} gives the variance of r^{2p} for the L_2p check
+        w2_times=(T,),
+        run_dir=run_dir,
+        progress=progress,
+    )
+    checks = checks_from_result(
+        res,
+        rho_tasil=rho_tasil,
+        delta_tasil=delta_tasil,
+        rho_l1=rho_l1,
+        p=p,
+        kappa=kappa,
+        delta_l1=delta_l1,
+        at_certified_l1=at_cert,
+        not_certified_why=why,
+    )
+    if T < s.horizon:
+        cause = (
+            "horizon shortened"
+            if horizon is not None and horizon < s.horizon
+            else "the largest multiple of the certified T_s"
+        )
+        notes.append(
+            f"simulated horizon [0, {T:.6g}] s ends {s.horizon - T:.3g} s before the certified "
+            f"T = {s.horizon:g} s ({cause}): the checks cover these times only (a violation "
+            "found is still one)"
+        )
+    short = None
+    if design is not None and not at_cert:
+        if design.Ts >= MIN_SIMULABLE_TS:
+            t_short = SHORT_STEPS * design.Ts
+            sres = run_scenarios(
+                s,
+                paths=SHORT_PATHS,
+                seed=seed,
+                dt=design.Ts,
+                T=t_short,
+                l1_params=L1Params(design.omega, design.lambda_s, design.Ts, design.Ts),
+                chunk_size=SHORT_PATHS,
+                record_every=SHORT_STEPS // 100,
+                kappas=kappas,
+                p_max=max(4, 2 * p),
+            )
+            short_checks = checks_from_result(
+                sres,
+                rho_tasil=rho_tasil,
+                delta_tasil=delta_tasil,
+                rho_l1=rho_l1,
+                p=p,
+                kappa=kappa,
+                delta_l1=delta_l1,
+                policy=False,
+            )
+            short = ShortHorizonRun(
+                horizon=t_short,
+                paths=SHORT_PATHS,
+                checks=tuple(short_checks),
+                note=f"short horizon [0, {t_short:.3g}] s at the certified parameters",
+            )
+        else:
+            notes.append(
+                f"no short-horizon run at the certified T_s = {design.Ts:.3g} s either: "
+                f"below {MIN_SIMULABLE_TS:g} s an Euler step is lost in float64 rounding"
+            )
+    emp: dict[str, Any] = {}
+    for key, gap in (
+        ("tig_max", "total_l1"),
+        ("policy_ig_max", "policy"),
+        ("uncertainty_ig_max", "uncertainty_l1"),
+        ("tig_max_without_l1", "total_true"),
+    ):
+        g = res.gap(gap)
+        emp[key] = {
+            "value": g.max_mean,
+            "ci_low": g.max_ci_low,
+            "ci_high": g.max_ci_high,
+            "argmax_time": g.argmax_time,
+        }
+    emp["w2"] = [w.to_dict() for w in res.w2]
+    notes.append(
+        "W2 estimates from samples are biased upward (see the same-law baselines "
+        "beside each); they are reported, not checked against a bound"
+    )
+    every = checks + (list(short.checks) if short is not None else [])
+    if overall_status(every) == NOTHING_CHECKED:
+        notes.insert(
+            0,
+            "nothing was checked: no finite certified bound could be compared at certified "
+            "parameters (see each check's reason)",
+        )
+    return ValidationReport(
+        checks=tuple(checks),
+        short_horizon=short,
+        certificate=cert,
+        empirical=emp,
+        at_certified_parameters=at_cert,
+        horizon=T,
+        certified_horizon=float(s.horizon),
+        l1_parameters={
+            "omega": params.omega,
+            "lambda_s": params.lambda_s,
+            "Ts": params.Ts,
+            "dt": params.dt,
+        },
+        diverged_fraction={st.name: st.diverged_fraction for st in res.status},
+        notes=tuple(notes),
+        result=res,
+    )
+
+
+def _thresholds(kappa: float | None, rho_tasil: float | None) -> tuple[float, ...]:
+    """Tail thresholds to simulate: ``kappa`` and ``rho_TaSIL + kappa`` where finite."""
+    out: list[float] = []
+    if kappa is not None and math.isfinite(kappa) and kappa > 0:
+        out.append(float(kappa))
+        if rho_tasil is not None and math.isfinite(rho_tasil) and rho_tasil >= 0:
+            out.append(float(rho_tasil) + float(kappa))
+    return tuple(dict.fromkeys(out))

@@ -1,0 +1,73 @@
+"""The four processes of the DRIP paper simulated for one system: the scenario runner of
+:func:`drip_cert.validate.validate` and its limits.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from drip_cert.model.system import System
+
+MAX_STEPS = 200_000  #: largest number of Euler steps per path accepted for a certified-T_s run
+SHORT_STEPS = 2_000  #: steps of the short-horizon run at the certified T_s (dt = T_s)
+SHORT_PATHS = 200  #: paths of the short-horizon run
+MIN_SIMULABLE_TS = 1e-9
+#: below this T_s an Euler step changes an O(1) state by less than ~1e-9 relative: with float64
+#: (eps 2.2e-16) the drift of one step keeps fewer than 7 digits, and below ~1e-15 it is lost
+#: entirely, so a run at such T_s says nothing about the certificate
+
+
+def x0_sampler(box) -> Any:
+    """Uniform initial law on the box ``D`` (jax key -> state)."""
+    from drip_cert._jax import jax, jnp
+
+    b = np.array(box, dtype=float)
+    lo, hi = jnp.asarray(b[:, 0]), jnp.asarray(b[:, 1])
+
+    def sample(key):
+        return jax.random.uniform(key, (b.shape[0],), minval=lo, maxval=hi, dtype=jnp.float64)
+
+    return sample
+
+
+# ----------------------------------------------------------------------------------------------
+# the checks: one statistic against one certified number, with a status
+
+
+def run_scenarios(
+    s: System,
+    *,
+    paths: int,
+    seed: int,
+    dt: float,
+    T: float,
+    l1_params: Any,
+    chunk_size: int,
+    record_every: int,
+    kappas: tuple[float, ...] = (),
+    p_max: int = 4,
+    w2_times: tuple[float, ...] = (),
+    run_dir: Path | None = None,
+    progress: bool = False,
+):
+    """Simulate the four scenarios of the DRIP paper for ``s`` (with its learned policy)."""
+    from drip_cert.sim.config import SimConfig
+    from drip_cert.sim.engine import simulate
+
+    cfg = SimConfig(
+        T=T,
+        dt=dt,
+        n_paths=paths,
+        seed=seed,
+        chunk_size=min(chunk_size, paths),
+        l1=l1_params,
+        record_every=record_every,
+        kappas=kappas,
+        p_max=p_max,
+        w2_times=w2_times,
+        w2_points=min(2000, max(2, paths // 2)),
+    )
+    return simulate(s.numeric, cfg, x0_sampler(s.support), run_dir=run_dir, progress=progress)
