@@ -55,6 +55,10 @@ _EXPORTS: dict[str, str] = {
     "simulate": "drip_cert.sim.engine",
     "SimModel": "drip_cert.model.numeric",
     "validate": "drip_cert.validate",
+    "ValidationReport": "drip_cert.validate",
+    "EmpiricalCheck": "drip_cert.validate",
+    "run_pipeline": "drip_cert.workflows",
+    "demonstration_set": "drip_cert.learn.imitation",
     "reproduce": "drip_cert.workflows",
 }
 

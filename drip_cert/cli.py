@@ -14,19 +14,20 @@ import sys
 from collections.abc import Callable, Sequence
 from typing import Any
 
+from drip_cert.bounds.l1drac.toml import design_l1_report
 from drip_cert.errors import AssumptionViolation, DripCertError, SpecError
+from drip_cert.numerics.atomic_io import jsonable
+from drip_cert.report import certificate_markdown, l1_design_text, validation_text
+from drip_cert.spec import load_spec
+from drip_cert.workflows import reproduce, train_from_spec, validate_spec
 
 
 def _print_json(obj: Any) -> None:
-    from drip_cert.numerics.atomic_io import jsonable
-
     sys.stdout.write(json.dumps(jsonable(obj), indent=2, allow_nan=False) + "\n")
 
 
 # ---------------------------------------------------------------------------- subcommands
 def cmd_check_spec(args: argparse.Namespace) -> int:
-    from drip_cert.spec import load_spec
-
     spec = load_spec(args.spec)
     s = spec.system
     if args.json:
@@ -41,9 +42,9 @@ def cmd_check_spec(args: argparse.Namespace) -> int:
 
 
 def cmd_certify(args: argparse.Namespace) -> int:
-    from drip_cert.bounds.certificate import certify
-    from drip_cert.report import certificate_markdown
-    from drip_cert.spec import load_spec
+    from drip_cert.bounds.certificate import (  # scipy.optimize: keep off the CLI start-up path
+        certify,
+    )
 
     spec = load_spec(args.spec)
     cert = certify(spec, progress=not (args.json or args.quiet))
@@ -70,21 +71,15 @@ def cmd_certify(args: argparse.Namespace) -> int:
 
 
 def cmd_design_l1(args: argparse.Namespace) -> int:
-    from drip_cert.bounds.l1drac.toml import design_l1_report
-
     report = design_l1_report(args.constants)
     if args.json:
         _print_json(report)
     else:
-        from drip_cert.report import l1_design_text
-
         print(l1_design_text(report))
     return 0 if report["feasible"] else 1
 
 
 def cmd_train(args: argparse.Namespace) -> int:
-    from drip_cert.workflows import train_from_spec
-
     summary = train_from_spec(
         args.spec,
         method=args.method,
@@ -105,8 +100,6 @@ def cmd_train(args: argparse.Namespace) -> int:
 
 
 def cmd_validate(args: argparse.Namespace) -> int:
-    from drip_cert.workflows import validate_spec
-
     report = validate_spec(
         args.spec,
         trajectories=args.trajectories,
@@ -119,16 +112,12 @@ def cmd_validate(args: argparse.Namespace) -> int:
     if args.json:
         _print_json(report.to_dict())
     else:
-        from drip_cert.report import validation_text
-
         print(validation_text(report.to_dict()))
     # exit 0 only when a finite bound was checked and none is violated (not "nothing checked")
     return 0 if report.status == "holds" else 1
 
 
 def cmd_reproduce(args: argparse.Namespace) -> int:
-    from drip_cert.workflows import reproduce
-
     report = reproduce(
         args.name, out=args.out, quick=args.quick, seed=args.seed, progress=not args.json
     )

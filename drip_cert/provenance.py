@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from enum import StrEnum
 from typing import Any
 
@@ -412,8 +412,6 @@ class Check:
 
     def with_scope(self, ok: bool, reason: str) -> Check:
         """The same check with its use justified (``ok``) or not, and why."""
-        from dataclasses import replace
-
         return replace(self, scope_ok=bool(ok), scope_reason=reason)
 
     def to_dict(self) -> dict[str, Any]:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from pathlib import Path
 from typing import Any
 
 
@@ -234,12 +235,10 @@ def reproduce_figure(
     Mean over paths with the t-interval band of the large ensemble, the paper-size ensemble as
     thin lines, and the certified bounds where they apply.
     """
-    from pathlib import Path
-
-    import matplotlib
+    import matplotlib  # matplotlib: keep off the CLI start-up path
 
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    import matplotlib.pyplot as plt  # matplotlib: keep off the CLI start-up path
 
     out = Path(out)
     fig, ax = plt.subplots(figsize=(7.5, 4.5))

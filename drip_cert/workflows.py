@@ -31,6 +31,8 @@ import numpy as np
 from drip_cert.errors import SpecError
 from drip_cert.numerics.atomic_io import atomic_write_json, atomic_write_text, jsonable
 from drip_cert.progress import Stages
+from drip_cert.report import certificate_markdown, reproduce_figure, reproduce_markdown
+from drip_cert.spec import load_spec
 from drip_cert.spec.load import Spec
 
 if TYPE_CHECKING:
@@ -128,7 +130,10 @@ def run_pipeline(
     progress
         Stages, training steps and simulation progress on stderr.
     """
-    from drip_cert.learn.imitation import demonstration_set, train_on_system
+    from drip_cert.learn.imitation import (  # jax: keep off the CLI start-up path
+        demonstration_set,
+        train_on_system,
+    )
 
     stage = Stages("pipeline", enabled=progress)
     st = spec.settings.tasil
@@ -166,7 +171,9 @@ def run_pipeline(
         )
     cert = None
     if certify or paths:
-        from drip_cert.bounds.certificate import certify as _certify
+        from drip_cert.bounds.certificate import (  # scipy.optimize: keep off the CLI start-up path
+            certify as _certify,
+        )
 
         stage("certificate")
         t0 = time.perf_counter()
@@ -174,7 +181,7 @@ def run_pipeline(
         timings["certify_s"] = time.perf_counter() - t0
     reports = []
     if paths:
-        from drip_cert.validate import validate
+        from drip_cert.validate import validate  # scipy.stats: keep off the CLI start-up path
 
         sim = dataclasses.replace(spec.settings.simulation, **dict(simulation or {}))
         for n in paths:
@@ -209,8 +216,8 @@ def run_pipeline(
 
 def _heldout_gap(s: Any, tp: TrainedPolicy, samples: int) -> np.ndarray:
     """Max over the horizon of ``||x'_t - x*_t||`` from each held-out initial state."""
-    from drip_cert.learn.imitation import nominal_field
-    from drip_cert.learn.tasil import evaluate_gap
+    from drip_cert.learn.imitation import nominal_field  # jax: keep off the CLI start-up path
+    from drip_cert.learn.tasil import evaluate_gap  # jax: keep off the CLI start-up path
 
     assert tp.heldout is not None  # called only when held-out demonstrations exist
     return np.asarray(
@@ -243,8 +250,7 @@ def train_from_spec(
     ``use_in_spec`` in ``train.json`` is the TOML that makes a spec certify this policy on these
     demonstrations (the ``[tasil]`` seed and sizes included).
     """
-    from drip_cert.learn.data import save_demonstrations
-    from drip_cert.spec import load_spec
+    from drip_cert.learn.data import save_demonstrations  # jax: keep off the CLI start-up path
 
     spec = load_spec(spec_path)
     over: dict[str, Any] = {"trajectories": trajectories, "method": method}
@@ -309,8 +315,6 @@ def validate_spec(
     demonstrations then feed the certificate). ``trajectories`` is the number of simulated
     paths; ``out`` receives ``validation.json`` and the simulation (atomically).
     """
-    from drip_cert.spec import load_spec
-
     spec = load_spec(spec_path)
     tasil = {"steps": min(spec.settings.tasil.steps, 300)} if quick else None
     run = run_pipeline(
@@ -353,9 +357,6 @@ def reproduce(
     name: str, *, out: str | Path, quick: bool = False, seed: int = 0, progress: bool = True
 ) -> dict[str, Any]:
     """``drip-cert reproduce paper-4d``; see the module docstring."""
-    from drip_cert.report import certificate_markdown, reproduce_figure, reproduce_markdown
-    from drip_cert.spec import load_spec
-
     t_start = time.perf_counter()
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)

@@ -25,6 +25,14 @@ TOL = 1e-6
 EVAL_SLACK = 1e-12
 #: points of the sampled soundness check
 N_SAMPLES = 20_000
+#: a maximum known to TOL in value locates a quadratic peak only to ~sqrt(TOL) = 1e-3 in x
+ARGMAX_TOL = 1e-2
+#: a stopping tolerance no search reaches in a few boxes: only the box budget stops it
+UNREACHABLE_ATOL = 1e-12
+#: no stopping tolerance at all: only a budget stops the search
+NO_ATOL = 0.0
+#: a tolerance the first box meets at once (upper 0 - lower -0.25 <= 0.5)
+MET_AT_ONCE_ATOL = 0.5
 
 x, y = sp.symbols("x y", real=True)
 
@@ -63,7 +71,7 @@ def test_concave_quadratic_1d_reaches_its_maximum():
     res, f = _search(1 - (x - sp.Rational(3, 10)) ** 2, [x], [(-1.0, 2.0)], atol=TOL)
     assert res.converged and res.stop == "converged"
     assert 1.0 <= res.upper <= 1.0 + TOL
-    assert res.lower <= 1.0 and abs(res.argmax[0] - 0.3) < 1e-2
+    assert res.lower <= 1.0 and abs(res.argmax[0] - 0.3) < ARGMAX_TOL
     assert _is_sound(res, f, [(-1.0, 2.0)])
 
 
@@ -83,7 +91,7 @@ def test_abs_sin_has_maximum_one():
     # interior extrema with a rigorous pi, so the bound is 1 to the last ulp
     res, f = _search(sp.Abs(sp.sin(x)), [x], [(0.0, 10.0)], atol=TOL, corners=True)
     assert res.converged and 1.0 <= res.upper <= 1.0 + TOL
-    assert min(abs(res.argmax[0] - k * math.pi / 2) for k in (1, 3, 5)) < 1e-2
+    assert min(abs(res.argmax[0] - k * math.pi / 2) for k in (1, 3, 5)) < ARGMAX_TOL
 
 
 @settings(max_examples=25, deadline=None)
@@ -124,14 +132,14 @@ def test_a_wrong_upper_bound_function_is_caught_by_the_check():
 def test_box_budget_is_reported_and_the_bound_stays_sound():
     expr = 3 - (x - sp.Rational(1, 2)) ** 2 - 2 * (y + sp.Rational(1, 4)) ** 2
     box = [(-2.0, 2.0), (-2.0, 2.0)]
-    res, f = _search(expr, [x, y], box, atol=1e-12, max_boxes=9)
+    res, f = _search(expr, [x, y], box, atol=UNREACHABLE_ATOL, max_boxes=9)
     assert res.stop == "max_boxes" and not res.converged
     assert res.n_boxes == 9  # 1 + 2 splits per step, 4 splits
     assert res.upper >= 3.0 and _is_sound(res, f, box)
 
 
 def test_time_budget_is_reported():
-    res, _ = _search(1 - x**2, [x], [(-1.0, 1.0)], atol=0.0, max_time_s=0.0)
+    res, _ = _search(1 - x**2, [x], [(-1.0, 1.0)], atol=NO_ATOL, max_time_s=0.0)
     assert res.stop == "max_time" and not res.converged and res.upper >= 1.0
 
 
@@ -174,7 +182,12 @@ def test_initial_value_replaces_sampling_of_the_first_box():
         return -1.0
 
     res = maximize(
-        [(0.0, 1.0)], lambda b: 0.0, value, atol=0.5, initial=(-0.25, [0.3]), max_boxes=1
+        [(0.0, 1.0)],
+        lambda b: 0.0,
+        value,
+        atol=MET_AT_ONCE_ATOL,
+        initial=(-0.25, [0.3]),
+        max_boxes=1,
     )
     assert not calls and res.lower == -0.25 and res.argmax == (0.3,) and res.converged
 

@@ -7,49 +7,53 @@ import json
 import pytest
 
 from drip_cert.cli import main
+from tests.helpers import (
+    CLOSED_FORM_TOL,
+    DOUBLE_INTEGRATOR_CONSTANTS,
+    PAPER_4D_SPEC,
+    example_spec,
+    run_cli,
+    write_spec,
+)
 
-PAPER = "drip_cert/data/paper_4d/paper_4d.toml"
-EXACT_TOL = 1e-12  # closed-form rates/gains of linear closed loops: rounding only
-SOUND_ROUNDING_TOL = 1e-9  # sound interval bounds are rounded outward by a few ulps per operation
-
-
-def run(capsys, *argv):
-    code = main(list(argv))
-    out, err = capsys.readouterr()
-    return code, out, err
+PAPER = str(PAPER_4D_SPEC)
+# sound interval bounds are rounded outward by a few ulps per operation (observed 1.6e-15 on the
+# A7 margin below; 1e-9 is generous)
+SOUND_ROUNDING_TOL = 1e-9
 
 
 def test_check_spec_ok(capsys):
-    code, out, _ = run(capsys, "check-spec", PAPER)
+    code, out, _ = run_cli(capsys, "check-spec", PAPER)
     assert code == 0
     assert "paper-4d" in out and "n = 4" in out
 
 
 def test_check_spec_bad_input_exit_2_no_traceback(tmp_path, capsys):
-    p = tmp_path / "bad.toml"
-    p.write_text(
+    p = write_spec(
+        tmp_path,
         '[system]\nname = "x"\nstates = ["x1"]\nhorizon = 1.0\n[dynamics]\n'
         'f = ["__import__(\'os\')"]\ng = [["1"]]\n[policy]\nexpert = ["-x1"]\n'
-        "[initial]\nsupport = [[0.0, 1.0]]\n"
+        "[initial]\nsupport = [[0.0, 1.0]]\n",
+        "bad.toml",
     )
-    code, out, err = run(capsys, "check-spec", str(p))
+    code, out, err = run_cli(capsys, "check-spec", str(p))
     assert code == 2
     assert "dynamics.f[0]" in err and str(p) in err
     assert "Traceback" not in err and out == ""
 
 
 def test_certify_paper_example_json(capsys):
-    code, out, _ = run(capsys, "certify", PAPER, "--json")
+    code, out, _ = run_cli(capsys, "certify", PAPER, "--json")
     assert code == 0
     d = json.loads(out)
     assert d["certified"] is True
     # expert closed loop -(0.05 + 0.25 * 0.2) I = -0.1 I: rate 0.1 exactly, on all of R^4
-    assert abs(d["contraction"]["rate"] - 0.1) < EXACT_TOL
+    assert abs(d["contraction"]["rate"] - 0.1) < CLOSED_FORM_TOL
     assert d["contraction"]["method"] == "exact-linear"
     assert d["contraction"]["how"] == "exact"
     # comparison-lemma gain ||g||_2 / lambda = 0.25 / 0.1; the paper's Delta_g / lambda = 0.5/0.1
-    assert abs(d["delta_iss"]["gain"] - 2.5) < EXACT_TOL
-    assert abs(d["delta_iss"]["gain_paper"] - 5.0) < EXACT_TOL
+    assert abs(d["delta_iss"]["gain"] - 2.5) < CLOSED_FORM_TOL
+    assert abs(d["delta_iss"]["gain_paper"] - 5.0) < CLOSED_FORM_TOL
     ids = {a["id"] for a in d["assumptions"]}
     assert {"DRIP-A1", "DRIP-A2", "L1DRAC-A7"} <= ids
     assert all({"id", "holds", "detail"} <= set(a) for a in d["assumptions"])
@@ -57,7 +61,7 @@ def test_certify_paper_example_json(capsys):
 
 
 def test_certify_infeasible_example_says_why(capsys):
-    code, out, _ = run(capsys, "certify", "examples/infeasible_2d/infeasible_2d.toml", "--json")
+    code, out, _ = run_cli(capsys, "certify", str(example_spec("infeasible_2d")), "--json")
     assert code == 1
     d = json.loads(out)
     assert d["certified"] is False
@@ -69,7 +73,7 @@ def test_certify_infeasible_example_says_why(capsys):
 
 
 def test_certify_nonlinear_example_is_sound_on_box(capsys):
-    code, out, _ = run(capsys, "certify", "examples/nonlinear_2d/nonlinear_2d.toml", "--json")
+    code, out, _ = run_cli(capsys, "certify", str(example_spec("nonlinear_2d")), "--json")
     assert code == 0
     c = json.loads(out)["contraction"]
     assert c["how"] == "sound" and c["method"] == "interval-bnb"
@@ -81,29 +85,27 @@ def test_certify_nonlinear_example_is_sound_on_box(capsys):
 
 
 def test_certify_markdown(capsys):
-    code, out, _ = run(capsys, "certify", "examples/unmatched_2d/unmatched_2d.toml")
+    code, out, _ = run_cli(capsys, "certify", str(example_spec("unmatched_2d")))
     assert code == 0
     assert out.startswith("# drip-cert certificate: unmatched-2d")
     assert "| DRIP-A2 | holds |" in out
 
 
 def test_design_l1_calculator(capsys):
-    code, out, _ = run(
-        capsys, "design-l1", "examples/l1drac_constants/double_integrator.toml", "--json"
-    )
+    code, out, _ = run_cli(capsys, "design-l1", str(DOUBLE_INTEGRATOR_CONSTANTS), "--json")
     assert code == 0
     d = json.loads(out)
     assert d["feasible"] is True
     assert [c["eq"] for c in d["conditions"]] == ["16a", "16b", "21a", "21b", "24"]
     assert all(c["holds"] and c["margin"] >= 0 for c in d["conditions"])
-    assert d["rho"] == pytest.approx(d["rho_r"] + d["rho_a"], rel=EXACT_TOL)
+    assert d["rho"] == pytest.approx(d["rho_r"] + d["rho_a"], rel=CLOSED_FORM_TOL)
 
 
 def test_design_l1_bad_key_exit_2(tmp_path, capsys):
-    text = open("examples/l1drac_constants/double_integrator.toml").read()
+    text = DOUBLE_INTEGRATOR_CONSTANTS.read_text()
     p = tmp_path / "c.toml"
     p.write_text(text.replace("[constants]", "[constants]\nlambdaa = 3.0", 1))
-    code, _, err = run(capsys, "design-l1", str(p))
+    code, _, err = run_cli(capsys, "design-l1", str(p))
     assert code == 2
     assert "lambdaa" in err
 

@@ -19,10 +19,15 @@ from drip_cert.sim import kernel
 from drip_cert.sim.config import STATUS_CAP, STATUS_NONFINITE, SimConfig
 from drip_cert.sim.engine import simulate
 from drip_cert.sim.kernel import build_chunk_fn
+from tests.helpers import MC_Z, example_spec
 
-Z_CLT = 4.5
-"""CLT tolerance in standard errors: a correct sampler fails a check with probability ~7e-6
-(the seeds are fixed, so a pass is reproducible; the width is what makes the test meaningful)."""
+POINT_MASS_ATOL = 1e-15
+"""At t = 0 the law is a point mass (variance 0): the sample mean of 20000 equal O(1) values
+may be off by an ulp."""
+
+RECURSION_RTOL = 1e-13
+"""x0 r^k (one power) against k multiplications by r (the engine's recursion, k <= 100): a few
+ulps per step at most."""
 
 L1_GAP_RATIO = 0.1
 """Upper bound on (uncertainty gap with L1) / (without L1) for the constant matched disturbance
@@ -41,6 +46,10 @@ NORM_RTOL = 1e-14
 EULER_RTOL = 2.5e-3
 """Global error of explicit Euler on a stable linear ODE over [0, T], relative: about
 dt * T / 2 = 2.5e-3 for dt = 1e-3, T = 5 and unit-size eigenvalues."""
+
+EULER_ATOL = EULER_RTOL * 0.5
+"""The same relative error of the matched disturbance's size 0.5, for gaps near their start at
+exactly 0."""
 
 
 def _ou_model(a: float, s: float):
@@ -86,11 +95,11 @@ def test_euler_maruyama_on_ornstein_uhlenbeck():
         mean = x0 * r**k
         var = s**2 * dt * (1.0 - r ** (2 * k)) / (1.0 - r**2)
         xs = recs[i, 1, :, 0]
-        assert abs(xs.mean() - mean) <= Z_CLT * math.sqrt(var / n_paths) + 1e-15
+        assert abs(xs.mean() - mean) <= MC_Z * math.sqrt(var / n_paths) + POINT_MASS_ATOL
         if k:
-            assert abs(xs.var(ddof=1) - var) <= Z_CLT * var * math.sqrt(2.0 / (n_paths - 1))
+            assert abs(xs.var(ddof=1) - var) <= MC_Z * var * math.sqrt(2.0 / (n_paths - 1))
             # the nominal ODE is the Euler recursion without noise: exactly the mean
-            np.testing.assert_allclose(recs[i, 0, :, 0], mean, rtol=1e-13)
+            np.testing.assert_allclose(recs[i, 0, :, 0], mean, rtol=RECURSION_RTOL)
     # the continuous-time OU law is within the O(dt) scheme bias of the Euler law at T
     t_end = n_steps * dt
     var_ct = s**2 / (2 * a) * (1.0 - math.exp(-2 * a * t_end))
@@ -100,10 +109,10 @@ def test_euler_maruyama_on_ornstein_uhlenbeck():
     res = simulate(model, cfg, sampler, progress=False)
     g = res.gap("uncertainty_true")
     v = var  # at T
-    assert abs(g.moments[0, -1] - v) <= Z_CLT * math.sqrt(2.0) * v / math.sqrt(n_paths)
-    assert abs(g.moments[1, -1] - 3 * v**2) <= Z_CLT * math.sqrt(96.0) * v**2 / math.sqrt(n_paths)
+    assert abs(g.moments[0, -1] - v) <= MC_Z * math.sqrt(2.0) * v / math.sqrt(n_paths)
+    assert abs(g.moments[1, -1] - 3 * v**2) <= MC_Z * math.sqrt(96.0) * v**2 / math.sqrt(n_paths)
     m_abs = math.sqrt(2 * v / math.pi)
-    assert abs(g.mean[-1] - m_abs) <= Z_CLT * math.sqrt(v * (1 - 2 / math.pi) / n_paths)
+    assert abs(g.mean[-1] - m_abs) <= MC_Z * math.sqrt(v * (1 - 2 / math.pi) / n_paths)
     # the t interval's half width is t_{0.975} * s / sqrt(N), s the sample sd of |N(0, v)|;
     # s has relative standard error sqrt((kurt - 1) / (4 N)), kurt = 3 + 8(pi-3)/(pi-2)^2
     half = g.ci_high[-1] - g.mean[-1]
@@ -111,7 +120,7 @@ def test_euler_maruyama_on_ornstein_uhlenbeck():
     kurt = 3 + 8 * (math.pi - 3) / (math.pi - 2) ** 2
     rel_se = math.sqrt((kurt - 1) / (4 * n_paths))
     expected = scipy.stats.t.ppf(0.975, n_paths - 1) * sd_abs / math.sqrt(n_paths)
-    assert half == pytest.approx(expected, rel=Z_CLT * rel_se)
+    assert half == pytest.approx(expected, rel=MC_Z * rel_se)
 
 
 def _mlp_model(seed: int = 0, uncertain: bool = True, learned_is_expert: bool = False):
@@ -390,7 +399,7 @@ def test_l1_cancels_constant_matched_disturbance():
     # e1 = 0.5 (1 - (1 + t) e^{-t}), e2 = 0.5 t e^{-t}
     t = res.times
     e_exact = np.hypot(0.5 * (1 - (1 + t) * np.exp(-t)), 0.5 * t * np.exp(-t))
-    np.testing.assert_allclose(without.mean, e_exact, rtol=EULER_RTOL, atol=EULER_RTOL * 0.5)
+    np.testing.assert_allclose(without.mean, e_exact, rtol=EULER_RTOL, atol=EULER_ATOL)
     assert with_l1.max_mean <= L1_GAP_RATIO * without.max_mean
 
 
@@ -445,7 +454,7 @@ def test_system_numeric_is_the_one_cached_view_with_exact_jacobians():
     from drip_cert.model.numeric import SimModel, closed_loop_jacobian
     from drip_cert.spec import load_spec
 
-    s = load_spec("examples/nonlinear_2d/nonlinear_2d.toml").system
+    s = load_spec(example_spec("nonlinear_2d")).system
     x1, x2 = s.states
     s = s.with_learned([-0.45 * x2 + 0.05 * x1])
     num = s.numeric

@@ -21,45 +21,43 @@ from drip_cert.bounds.l1drac import sides as S
 from drip_cert.bounds.l1drac.constants import CONSTANT_NAMES, L1Constants
 from drip_cert.bounds.l1drac.toml import design_l1_report, load_l1_constants
 from drip_cert.errors import AssumptionViolation, SpecError
+from tests.helpers import (
+    DOUBLE_INTEGRATOR_CONSTANTS,
+    REL_CLOSED_FORM,
+    di_constants,
+    random_constants,
+)
 
-EXAMPLE = Path(__file__).resolve().parents[1] / "examples/l1drac_constants/double_integrator.toml"
-
-#: relative agreement of two float64 evaluations of one closed form (a few roundings apart)
-REL_CLOSED_FORM = 1e-13
 #: expm1-based float64 vs 50-digit mpmath at Ts = 1e-14: a handful of roundings, no cancellation
 REL_MPMATH = 1e-12
 #: a non-decreasing map may round down by a few ulps between neighbouring grid points
 MONO_SLACK = 1e-12
 #: log-log slope fits over four decades: the next-order terms shift the slope by < 0.02
 SLOPE_TOL = 0.02
-
-
-def di_constants() -> L1Constants:
-    """The double-integrator constants of the example file (docs/math/l1drac.md section 8)."""
-    return load_l1_constants(EXAMPLE)[0]
-
-
-def random_constants(rng: np.random.Generator, **fixed: float) -> L1Constants:
-    """All constants positive (so every term of Appendix A is exercised), Assumption 7 kept."""
-    d: dict = {}
-    for n in CONSTANT_NAMES:
-        if n in ("p_star", "m"):
-            d[n] = int(rng.integers(1, 5))
-        elif n == "lip_f":
-            d[n] = bool(rng.integers(0, 2))
-        else:
-            d[n] = float(rng.uniform(0.1, 2.0))
-    d["lambda"] = float(rng.uniform(4.0, 20.0))  # >= 4 > Delta_g_perp * max(...), each < 2
-    d["p_star"] = 8
-    d.update(fixed)
-    return L1Constants.from_mapping(d)
+#: a map in O(Ts^{1/4}) falls by 1e-2 per 1e-8 step in Ts (observed 0.99999e-2); the 1e-4
+#: relative slack is for the higher-order terms, far below a slower rate (1e-8 -> 1e-1 at O(Ts^1/8))
+QUARTER_RATE_FALL = 1.0001e-2
+#: from Ts = 1e-4 to 1e-28 a map in O(Ts^{1/4}) falls by 1e-6 (observed 8.9e-7): 1e-5 leaves
+#: a factor 10
+VANISH_RATIO = 1e-5
+#: lets a map that is exactly 0 at both ends pass the strict "<" (no real value is this small)
+ZERO_GUARD = 1e-300
+#: (A.22c) at Ts = 1e-28: gamma_2 - 1 = O(omega Ts) = 1e-25 (it rounds to exactly 1), plus rounding
+GAMMA2_LIMIT_REL = 1e-20 + REL_CLOSED_FORM
+#: (A.22a) at Ts = 1e-28: Ts gamma_1 ~ sqrt(2 Ts) = 1.4e-14
+TS_GAMMA1_LIMIT = 1e-13
+#: Remark 3.1 at rho_r = 1e12: Gamma_r / rho^{3/2} is within O(rho^{-1/2}) of its limit
+#: (observed 1.5e-5)
+RHO_LIMIT_REL = 1e-4
+#: Remark 3.1 at omega = 1e12: omega / |2 lambda - omega| - 1 = 2 lambda / omega ~ 4e-11
+OMEGA_LIMIT_REL = 1e-10
 
 
 # ------------------------------------------------------------------ validation
 
 
 def test_example_file_loads_with_all_names() -> None:
-    c, req = load_l1_constants(EXAMPLE)
+    c, req = load_l1_constants(DOUBLE_INTEGRATOR_CONSTANTS)
     assert set(c.to_dict()) == set(CONSTANT_NAMES)
     assert c.lam == 10.0 and c.to_dict()["lambda"] == 10.0
     assert req.p == 1 and req.lambda_s == 100.0 and req.omega == 1000.0
@@ -108,7 +106,7 @@ def test_assumption_7_violation_gives_the_numbers() -> None:
 
 
 def test_toml_errors_name_file_and_field(tmp_path: Path) -> None:
-    text = EXAMPLE.read_text()
+    text = DOUBLE_INTEGRATOR_CONSTANTS.read_text()
     cases = {
         "Delta_g = 1.0": ("Delta_g = -1.0", "Delta_g"),
         "lambda = 10.0": ("lambda = nan", "lambda"),
@@ -132,7 +130,7 @@ def test_toml_errors_name_file_and_field(tmp_path: Path) -> None:
 def test_report_is_json_ready() -> None:
     import json
 
-    r = design_l1_report(EXAMPLE)
+    r = design_l1_report(DOUBLE_INTEGRATOR_CONSTANTS)
     s = json.dumps(r)
     back = json.loads(s)
     for k in ("feasible", "p", "omega", "lambda_s", "Ts", "rho_r", "rho_a", "rho", "kappa"):
@@ -284,12 +282,12 @@ def test_A21_maps_vanish_as_Ts_to_zero(seed: int) -> None:
         vals.append([m[k](xi) for k in m if k != "ring Upsilon"])
     vals = np.array(vals)
     # each map falls by at least the T^{1/4} rate: 1e-8 in Ts -> >= 1e-2 in value
-    assert np.all(vals[1:] <= vals[:-1] * 1.0001e-2 + 0.0)
-    assert np.all(vals[-1] < 1e-5 * np.maximum(vals[0], 1e-300) + 1e-300)
+    assert np.all(vals[1:] <= vals[:-1] * QUARTER_RATE_FALL)
+    assert np.all(vals[-1] < VANISH_RATIO * np.maximum(vals[0], ZERO_GUARD) + ZERO_GUARD)
     # (A.22c): gamma_2 -> 1 and (A.22a): Ts gamma_1 -> 0
     s = A.sampling_constants(c, 3, 1e3, 1e-28, 50.0)
-    assert s.gamma_2 == pytest.approx(1.0, rel=1e-20 + REL_CLOSED_FORM)
-    assert 1e-28 * s.gamma_1 < 1e-13
+    assert s.gamma_2 == pytest.approx(1.0, rel=GAMMA2_LIMIT_REL)
+    assert 1e-28 * s.gamma_1 < TS_GAMMA1_LIMIT
 
 
 # ------------------------------------------------------------------ Remarks 3.1 and 3.2
@@ -304,7 +302,7 @@ def test_remark_3_1_gamma_r_orders() -> None:
     lim = rc.otimes_1 / (2 * math.sqrt(c.lam))
     assert lim > 0
     ratios = [S.gamma_r(r, 1e3, rc) / r**1.5 for r in (1e4, 1e8, 1e12)]
-    assert abs(ratios[-1] / lim - 1) < 1e-4
+    assert abs(ratios[-1] / lim - 1) < RHO_LIMIT_REL
     assert abs(ratios[0] - lim) > abs(ratios[1] - lim) > abs(ratios[2] - lim)
     # O(1) in omega: bounded and convergent
     g = [S.gamma_r(2.0, w, rc) for w in (1e4, 1e8, 1e12)]
@@ -322,7 +320,7 @@ def test_remark_3_1_gamma_r_orders() -> None:
         * 2.0
         + rc.otimes_1 / (2 * math.sqrt(c.lam)) * r**1.5
     )
-    assert abs(g[2] / g_inf - 1) < 1e-10 < abs(g[0] / g_inf - 1)
+    assert abs(g[2] / g_inf - 1) < OMEGA_LIMIT_REL < abs(g[0] / g_inf - 1)
 
 
 def _slope(xs, ys) -> float:

@@ -18,6 +18,9 @@ GAIN_RTOL = 1e-12
 ROUNDING_ATOL = 1e-13
 """Quantities that are zero in exact arithmetic; absolute errors are a few ulps of O(1) states."""
 
+SAME_FORMULA_REL = 1e-15
+"""The adaptation gain against -lambda_s / expm1(lambda_s Ts) written out: one formula, an ulp."""
+
 STEADY_RTOL = 1e-9
 """Relative error of the steady state after many filter time constants and adaptation periods:
 the transients decay like e^{-omega t} and q^i with |q| < 1e-2 per period, far below this."""
@@ -150,7 +153,7 @@ def test_vmap_and_jit_match_single_path():
 def test_params_validation():
     p = L1Params(omega=50.0, lambda_s=10.0, Ts=0.01, dt=0.001)
     assert p.k == 10
-    assert p.adaptation_gain == pytest.approx(-10.0 / math.expm1(0.1), rel=1e-15)
+    assert p.adaptation_gain == pytest.approx(-10.0 / math.expm1(0.1), rel=SAME_FORMULA_REL)
     with pytest.raises(SpecError, match="not an integer multiple of dt"):
         L1Params(omega=50.0, lambda_s=10.0, Ts=0.01, dt=0.003)
     with pytest.raises(SpecError, match="L1Params.omega"):

@@ -17,7 +17,6 @@ import mpmath
 import numpy as np
 import pytest
 from flint import arb, ctx
-from test_l1drac_constants import di_constants, random_constants
 
 from drip_cert.bounds.l1drac import appendix as A
 from drip_cert.bounds.l1drac import backend, backoff, searches
@@ -28,6 +27,7 @@ from drip_cert.bounds.l1drac.constants import CONSTANT_NAMES, L1Constants
 from drip_cert.bounds.l1drac.designer import design
 from drip_cert.bounds.l1drac.request import DesignRequest
 from drip_cert.provenance import How, Quantity
+from tests.helpers import by_eq, di_constants, random_constants
 
 #: float64 vs the Arb midpoint of one closed form of Appendix A (a few hundred roundings at most;
 #: the expm1 / phi2 rewrites leave no cancellation), relative to the form's magnitude
@@ -47,6 +47,10 @@ KNIFE_EDGE_REL = 100 * searches.ROOT_RTOL
 N_DESIGNS = 30
 #: the largest relative back-off the designer may apply (BACKOFF_STEPS tries)
 MAX_BACKOFF = backoff.BACKOFF_START * backoff.BACKOFF_GROWTH ** (backoff.BACKOFF_STEPS - 1)
+#: floor of the scale a ball's radius is compared with, so that an exact zero (radius 0) passes
+ZERO_SCALE = 1e-300
+#: random omega this close (relatively) to 2 lambda is moved: |2 lambda - omega| divides Theta
+POLE_DISTANCE = 1e-3
 
 
 def random_request(rng: np.random.Generator) -> tuple[int, float, float]:
@@ -180,7 +184,7 @@ def _close(f: float, ball: arb, scale: float) -> bool:
     mid = float(ball.mid())
     return abs(f - mid) <= REL_FLOAT_VS_ARB * max(abs(mid), scale) and float(
         ball.rad()
-    ) <= REL_ARB_RADIUS * max(abs(mid), scale, 1e-300)
+    ) <= REL_ARB_RADIUS * max(abs(mid), scale, ZERO_SCALE)
 
 
 @pytest.mark.parametrize("seed", range(6))
@@ -193,7 +197,7 @@ def test_float_and_arb_evaluations_agree(seed: int) -> None:
         c = random_constants(rng)
         p = int(rng.integers(1, 9))
         omega = float(10 ** rng.uniform(-1, 6))
-        if abs(omega - 2 * c.lam) < 1e-3 * omega:
+        if abs(omega - 2 * c.lam) < POLE_DISTANCE * omega:
             omega *= 1.5
         ls = float(10 ** rng.uniform(-1, 4))
         Ts = float(10 ** rng.uniform(-14, -1)) / max(omega, ls, 1.0)
@@ -274,7 +278,7 @@ def test_exact_zero_margin_is_not_verified() -> None:
     """A condition that holds with equality (margin exactly 0, closed form) is not verified:
     the float comparison ``>=`` says it holds, the Arb margin is the exact ball 0."""
     c = boundary_constants()
-    res = {r.eq: r for r in C.evaluate_conditions(c, 1, 1e3, 100.0, 1e-9, 1.0, 0.5)}
+    res = by_eq(C.evaluate_conditions(c, 1, 1e3, 100.0, 1e-9, 1.0, 0.5))
     for eq in ("16a", "16b"):
         assert res[eq].margin == 0.0 and res[eq].holds, eq
         assert res[eq].margin_lo == 0.0 == res[eq].margin_hi, eq

@@ -9,6 +9,11 @@ from its own package; two packages of one layer (``analysis`` | ``learn`` | ``co
 from __future__ import annotations
 
 import ast
+import io
+import re
+import subprocess
+import sys
+import tokenize
 from collections import defaultdict
 from pathlib import Path
 
@@ -60,30 +65,47 @@ def _modules() -> dict[str, Path]:
     return {_module_name(p): p for p in PKG.rglob("*.py")}
 
 
-def _imports(name: str, path: Path, known: set[str]) -> set[str]:
-    """Every drip_cert module ``name`` imports, at any depth of the file (function-local too)."""
-    tree = ast.parse(path.read_text(), filename=str(path))
-    package = name if path.name == "__init__.py" else name.rpartition(".")[0]
-    found: set[str] = set()
-    for node in ast.walk(tree):
-        targets: list[str] = []
-        if isinstance(node, ast.Import):
-            targets = [a.name for a in node.names]
-        elif isinstance(node, ast.ImportFrom):
-            base = node.module or ""
-            if node.level:
-                parts = package.split(".")[: len(package.split(".")) - node.level + 1]
-                base = ".".join([*parts, base] if base else parts)
-            # ``from pkg import module`` imports pkg.module; ``from mod import name`` imports mod
-            targets = [
-                f"{base}.{a.name}" if f"{base}.{a.name}" in known else base for a in node.names
-            ]
-        for t in targets:
+ImportNode = ast.Import | ast.ImportFrom
+
+
+def _package(name: str, path: Path) -> str:
+    return name if path.name == "__init__.py" else name.rpartition(".")[0]
+
+
+def _targets(node: ImportNode, package: str, known: set[str]) -> list[str]:
+    """The modules one import statement imports: a drip_cert one as the longest known module it
+    names, any other as written (``from scipy.optimize import root`` -> ``scipy.optimize``)."""
+    if isinstance(node, ast.Import):
+        targets = [a.name for a in node.names]
+    else:
+        base = node.module or ""
+        if node.level:
+            parts = package.split(".")[: len(package.split(".")) - node.level + 1]
+            base = ".".join([*parts, base] if base else parts)
+        # ``from pkg import module`` imports pkg.module; ``from mod import name`` imports mod
+        targets = [f"{base}.{a.name}" if f"{base}.{a.name}" in known else base for a in node.names]
+    out = []
+    for t in targets:
+        if t.startswith("drip_cert"):
             # the longest known module that t names (from pkg import module -> pkg.module)
             while t and t not in known:
                 t = t.rpartition(".")[0]
-            if t and t != name and t.startswith("drip_cert"):
-                found.add(t)
+        if t:
+            out.append(t)
+    return out
+
+
+def _imports(name: str, path: Path, known: set[str]) -> set[str]:
+    """Every drip_cert module ``name`` imports, at any depth of the file (function-local too)."""
+    tree = ast.parse(path.read_text(), filename=str(path))
+    found: set[str] = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import | ast.ImportFrom):
+            found.update(
+                t
+                for t in _targets(node, _package(name, path), known)
+                if t != name and t.startswith("drip_cert")
+            )
     return found
 
 
@@ -215,3 +237,200 @@ def test_the_checker_fails_on_an_upward_import_a_sideways_import_and_a_cycle():
         {"drip_cert.bounds.a": {"drip_cert.sim.b"}, "drip_cert.sim.c": {"drip_cert.bounds.d"}}
     )
     assert _cycles(pk) == [["bounds", "sim"]]
+
+
+# ---------------------------------------------------------------------------- local imports
+#: Third-party packages slow enough to import that a function-local import may keep them off an
+#: import path (the design allows one "only to keep jax off the CLI's start-up path"; the others
+#: are as slow: seconds each adds to ``import drip_cert.cli``, which already loads numpy, sympy
+#: and flint, were jax 0.3, optax 0.4, cvxpy 1.0, ot 0.9, matplotlib.pyplot 0.3, scipy.optimize
+#: 0.2, scipy.stats 0.5; clarabel is cvxpy's solver). numpy, sympy, scipy.special (0.1 s) and
+#: every drip_cert module are not on this list: import them at the top of the module.
+HEAVY: tuple[str, ...] = (
+    "jax",
+    "jaxlib",
+    "optax",
+    "cvxpy",
+    "clarabel",
+    "ot",
+    "matplotlib",
+    "scipy.optimize",
+    "scipy.stats",
+)
+
+#: the justification a function-local import carries on its line: ``# jax: <why>``
+_JUSTIFICATION = re.compile(r"#\s*([\w.]+)\s*:")
+
+
+def _heavy(target: str) -> set[str]:
+    return {h for h in HEAVY if target == h or target.startswith(h + ".")}
+
+
+def _parents(module: str) -> list[str]:
+    """The packages whose ``__init__`` importing ``module`` runs first (``drip_cert`` included)."""
+    parts = module.split(".")
+    return [".".join(parts[:i]) for i in range(1, len(parts))]
+
+
+def _split_imports(path: Path) -> tuple[list[ImportNode], list[ImportNode]]:
+    """(module-level, function-local) import statements of a file; an ``if TYPE_CHECKING:`` block
+    imports nothing at run time and is skipped. A class body runs at import: module level."""
+    top: list[ImportNode] = []
+    local: list[ImportNode] = []
+
+    def visit(node: ast.AST, in_function: bool) -> None:
+        for child in ast.iter_child_nodes(node):
+            if isinstance(child, ast.If) and "TYPE_CHECKING" in ast.unparse(child.test):
+                for stmt in child.orelse:
+                    visit_one(stmt, in_function)
+                continue
+            visit_one(child, in_function)
+
+    def visit_one(node: ast.AST, in_function: bool) -> None:
+        if isinstance(node, ast.Import | ast.ImportFrom):
+            (local if in_function else top).append(node)
+        visit(node, in_function or isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef))
+
+    visit(ast.parse(path.read_text(), filename=str(path)), False)
+    return top, local
+
+
+def _heavy_reach(mods: dict[str, Path]) -> dict[str, frozenset[str]]:
+    """The :data:`HEAVY` packages that importing each drip_cert module imports: through its
+    module-level imports and its parent packages', transitively."""
+    known = set(mods)
+    top = {
+        m: [t for node in _split_imports(p)[0] for t in _targets(node, _package(m, p), known)]
+        for m, p in mods.items()
+    }
+    reach = {}
+    for m in mods:
+        seen: set[str] = set()
+        stack = [m]
+        found: set[str] = set()
+        while stack:
+            x = stack.pop()
+            if x in seen:
+                continue
+            seen.add(x)
+            if x in top:
+                stack.extend(top[x] + _parents(x))
+            else:
+                found |= _heavy(x)
+        reach[m] = frozenset(found)
+    return reach
+
+
+def _local_import_problems(
+    name: str, path: Path, known: set[str], reach: dict[str, frozenset[str]]
+) -> list[str]:
+    """Each function-local import of module ``name`` that does not carry ``# <package>: <why>``
+    naming a :data:`HEAVY` package which the imported module brings and ``name`` itself, at module
+    level, does not (otherwise the import belongs at the top of the module)."""
+
+    def brings(target: str) -> frozenset[str]:
+        return reach.get(target, frozenset(_heavy(target)))
+
+    source = path.read_text()
+    comments: dict[int, list[str]] = defaultdict(list)
+    for tok in tokenize.generate_tokens(io.StringIO(source).readline):
+        if tok.type == tokenize.COMMENT:
+            comments[tok.start[0]].append(tok.string)
+    top, local = _split_imports(path)
+    package = _package(name, path)
+    own: set[str] = set()
+    for t in [t for node in top for t in _targets(node, package, known)] + _parents(name):
+        own |= brings(t)
+    problems = []
+    for node in local:
+        assert node.end_lineno is not None
+        extra: set[str] = set()
+        for t in _targets(node, package, known):
+            extra |= brings(t) - own
+        named = [
+            m.group(1)
+            for line in range(node.lineno, node.end_lineno + 1)
+            for c in comments[line]
+            if (m := _JUSTIFICATION.match(c))
+        ]
+        where = f"{name}:{node.lineno}: {ast.unparse(node)}"
+        if not extra:
+            problems.append(
+                f"{where}: imports no heavy package the module lacks (move it to the top)"
+            )
+        elif not any(n in extra for n in named):
+            problems.append(f"{where}: justify it on its line, e.g. `# {min(extra)}: <why>`")
+    return problems
+
+
+def test_every_function_local_import_keeps_a_heavy_package_off_an_import_path():
+    mods = _modules()
+    reach = _heavy_reach(mods)
+    bad = [
+        problem
+        for m, p in sorted(mods.items())
+        for problem in _local_import_problems(m, p, set(mods), reach)
+    ]
+    assert not bad, "\n".join(bad)
+
+
+@pytest.mark.parametrize(
+    "source, problem",
+    [
+        ("def f():\n    import numpy as np\n", "move it to the top"),
+        (
+            "def f():\n    import math  # jax: keep off the CLI start-up path\n",
+            "move it to the top",
+        ),
+        ("def f():\n    from drip_cert._jax import jnp\n", "justify it"),
+        ("def f():\n    from drip_cert._jax import jnp  # numpy: fast\n", "justify it"),
+        ("def f():\n    from drip_cert._jax import jnp  # cvxpy: wrong package\n", "justify it"),
+        (
+            "from drip_cert._jax import jax\n\n\ndef f():\n"
+            "    from drip_cert._jax import jnp  # jax: the module imports it anyway\n",
+            "move it to the top",
+        ),
+        (
+            "from drip_cert.numerics.interval import enclose_expr\n\n\ndef f():\n"
+            "    from drip_cert.numerics.interval import interval_add  # jax: not imported\n",
+            "move it to the top",
+        ),
+        (
+            "def f():\n    from drip_cert._jax import jnp  # jax: keep off the CLI start-up path\n",
+            "",
+        ),
+        ("def f():\n    import matplotlib.pyplot as plt  # matplotlib: only for figures\n", ""),
+        (
+            "def f():\n    from drip_cert.analysis.lmi import (  # cvxpy: one function needs it\n"
+            "        contraction_metric,\n    )\n",
+            "",
+        ),
+        (
+            "from typing import TYPE_CHECKING\n\nif TYPE_CHECKING:\n"
+            "    from drip_cert._jax import jnp\n\n\nclass A:\n    import json\n",
+            "",
+        ),
+    ],
+)
+def test_the_local_import_checker(tmp_path, source, problem):
+    """The checker itself, on made-up modules: an unjustified or needless local import fails."""
+    path = tmp_path / "mod.py"
+    path.write_text(source)
+    mods = _modules()
+    problems = _local_import_problems("drip_cert.analysis.mod", path, set(mods), _heavy_reach(mods))
+    if problem:
+        assert len(problems) == 1 and problem in problems[0], problems
+    else:
+        assert problems == []
+
+
+def test_the_cli_starts_without_jax_or_any_heavy_package():
+    code = (
+        "import drip_cert.cli, sys; assert 'jax' not in sys.modules; "
+        f"print(','.join(h for h in {HEAVY!r} if h in sys.modules))"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, check=False
+    )
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip() == "", f"imported by `import drip_cert.cli`: {out.stdout}"

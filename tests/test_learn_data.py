@@ -20,44 +20,22 @@ from drip_cert.learn.data import (
     save_demonstrations,
     simulate_closed_loop,
 )
-from drip_cert.model.mlp import init_mlp
+from tests.helpers import MC_FIVE_SIGMA, ROUNDING_ATOL
+from tests.helpers import PAPER_LIKE_BOX as BOX
+from tests.helpers import PAPER_LIKE_H_MLP as H_MLP
+from tests.helpers import paper_like_expert as expert
+from tests.helpers import paper_like_field as field
 
 IVP_TOL = 1e-12  # rtol = atol of the DOP853 reference solution (near double precision)
 RK4_VS_IVP_ATOL = 1e-10  # h = 0.0125 RK4 on rates <= ~1: error ~ h^4 / 100 ~ 1e-10 at most
 CLOSED_FORM_ATOL = 1e-12  # linear decay at rate 0.1, h = 0.0125: RK4 error ~ 1e-13
 ORDER_TOL = 0.15  # observed convergence order of RK4 must be 4 +- 0.15 on a smooth problem
 RICHARDSON_RATIO = (0.5, 2.0)  # Richardson estimate within a factor 2 of the true error
-ROUNDING_ATOL = 1e-14  # O(1) numbers computed by two float64 routes: a few ulps apart
-MEAN_SIGMAS = 5.0  # sample mean of N uniforms within 5 standard errors of the centre
-
-
-def _h_mlp():
-    return init_mlp((4, 16, 4), np.random.default_rng(12345), "tanh")
-
-
-H_MLP = _h_mlp()
-
-
-def h(x):
-    return H_MLP.apply_jax(x)
-
-
-def field(t, x, u):
-    """The paper-like 4-D example: x' = -0.05 x - 0.25 h(x) + 0.25 u."""
-    return -0.05 * x - 0.25 * h(x) + 0.25 * u
-
-
-def expert(x):
-    """u = -0.2 x + h(x): cancels h, closed loop x' = -0.1 x."""
-    return -0.2 * x + h(x)
 
 
 def weak_policy(x):
     """u = -0.2 x: leaves h in the loop, closed loop x' = -0.1 x - 0.25 h(x) (nonlinear)."""
     return -0.2 * x
-
-
-BOX = np.array([[-1.0, 1.0]] * 4)
 
 
 def _forced_field(t, x, u):
@@ -176,7 +154,7 @@ def test_initial_states_uniform_and_reproducible():
         width = box[:, 1] - box[:, 0]
         se = width / math.sqrt(12.0 * n)
         assert np.all(
-            np.abs(draws.mean(axis=0) - box.mean(axis=1)) <= MEAN_SIGMAS * se + ROUNDING_ATOL
+            np.abs(draws.mean(axis=0) - box.mean(axis=1)) <= MC_FIVE_SIGMA * se + ROUNDING_ATOL
         )
     assert not np.array_equal(a, sample_initial_states(box, n, np.random.default_rng(8)))
 

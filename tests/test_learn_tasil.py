@@ -23,12 +23,16 @@ from drip_cert.learn.losses import (
 )
 from drip_cert.learn.tasil import evaluate_gap, train_policy
 from drip_cert.model.mlp import apply_params, init_mlp, jax_params, load_mlp, mlp_from_params
+from tests.helpers import PAPER_LIKE_BOX as BOX
+from tests.helpers import ROUNDING_ATOL
+from tests.helpers import paper_like_expert as expert
+from tests.helpers import paper_like_field as field
+from tests.helpers import paper_like_h as h
 
 FD_STEP = 1e-5  # central differences: truncation ~ h^2 |f'''| ~ 1e-10, rounding ~ eps/h ~ 1e-11
 FD_ATOL = 1e-8  # both error sources above, with two orders of margin
 FD_GRAD_RTOL = 1e-6  # directional derivative of a loss built from norms of O(1) numbers
 CLOSED_FORM_RTOL = 1e-12  # the same formula evaluated by numpy and by jax: rounding only
-ROUNDING_ATOL = 1e-14  # O(1) numbers computed by two float64 routes: a few ulps apart
 PERTURBATION = 1e-3  # weight perturbation: makes e_0, e_1 ~ 1e-3, far above the 1e-8 floor
 ABOVE_FLOOR = 100.0  # "positive" means at least 100x the floor value (expected ~1e5x)
 LOSS_DROP = 0.5  # 200 Adam steps must at least halve the loss of the random network
@@ -36,22 +40,6 @@ GAP_ATOL = 1e-10  # RK4 with h = 0.0125 on a linear system: error ~ 1e-13
 MAX_TRAIN_SECONDS = 120.0  # the issue's limit for the paper example on two CPU cores
 
 T_HORIZON, K_SAMPLES, N_TRAJ = 10.0, 100, 20
-BOX = np.array([[-1.0, 1.0]] * 4)
-H_MLP = init_mlp((4, 16, 4), np.random.default_rng(12345), "tanh")
-
-
-def h(x):
-    return H_MLP.apply_jax(x)
-
-
-def field(t, x, u):
-    """Paper-like 4-D example: x' = -0.05 x - 0.25 h(x) + 0.25 u (h a seeded tanh 4-16-4)."""
-    return -0.05 * x - 0.25 * h(x) + 0.25 * u
-
-
-def expert(x):
-    """u = -0.2 x + h(x): cancels h; the expert closed loop is x' = -0.1 x."""
-    return -0.2 * x + h(x)
 
 
 @pytest.fixture(scope="module")

@@ -19,15 +19,21 @@ from drip_cert.analysis.lognorm import (
     spectral_abscissa,
 )
 from drip_cert.errors import SpecError
+from tests.helpers import CLOSED_FORM_TOL, MP_DPS
 
-#: closed forms vs LAPACK eigenvalues of O(1) matrices: a few hundred ulps
-CLOSED_FORM_TOL = 1e-12
 #: step of the one-sided difference in the definition mu(A) = lim (||I + hA|| - 1)/h
 H_DEF = 1e-7
 #: the difference quotient has error O(h ||A||^2) ~ 1e-6 for ||A|| ~ 3, plus rounding eps/h ~ 2e-9
 DEF_TOL = 2e-5
 #: rigorous bounds may exceed the float eigenvalue by O(n eps ||S||) only
 RIGOROUS_EXCESS = 1e-11
+#: sqrtm and a generalised eigenproblem of a P with condition number ~10: rounding amplified by
+#: the conditioning (observed 3e-15)
+CHANGE_OF_COORDINATES_TOL = 1e-10
+#: a bound rounded up by a few ulps against an exact max row sum of the same numbers
+ROUNDED_UP_REL = 1e-12
+#: eigvalsh of 3x3 O(1) matrices and the outward rounding of the Rohn bound
+EIGVALSH_SLACK = 1e-9
 
 
 def _batch(seed: int, shape=(50, 3, 3)) -> np.ndarray:
@@ -79,9 +85,9 @@ def test_weighted_mu2_is_mu2_after_change_of_coordinates():
     P = M @ M.T + 0.5 * np.eye(3)
     R = sl.sqrtm(P).real
     changed = mu_2(R @ A @ np.linalg.inv(R))
-    np.testing.assert_allclose(mu_2_weighted(A, P), changed, atol=1e-10)
+    np.testing.assert_allclose(mu_2_weighted(A, P), changed, atol=CHANGE_OF_COORDINATES_TOL)
     gen = [sl.eigh(0.5 * (a.T @ P + P @ a), P, eigvals_only=True)[-1] for a in A]
-    np.testing.assert_allclose(mu_2_weighted(A, P), gen, atol=1e-10)
+    np.testing.assert_allclose(mu_2_weighted(A, P), gen, atol=CHANGE_OF_COORDINATES_TOL)
     np.testing.assert_allclose(mu_2_weighted(A, np.eye(3)), mu_2(A), atol=CLOSED_FORM_TOL)
 
 
@@ -115,7 +121,7 @@ def test_perron_upper_bounds_spectral_radius():
         assert rho <= ub
         # Collatz-Wielandt with a near-Perron vector of the symmetric part: not tight for
         # non-symmetric N, but never worse than the max row sum
-        assert ub <= np.abs(n).sum(axis=1).max() * (1 + 1e-12)
+        assert ub <= np.abs(n).sum(axis=1).max() * (1 + ROUNDED_UP_REL)
 
 
 def test_interval_mu2_bound_contains_sampled_members():
@@ -127,17 +133,22 @@ def test_interval_mu2_bound_contains_sampled_members():
         members = C + R * rng.uniform(-1, 1, size=(500, 3, 3))
         assert mu_2(members).max() <= ub
         # and the Rohn bound is within rho(sym R) of the centre's mu_2
-        assert ub <= mu_2(C) + np.max(np.abs(np.linalg.eigvalsh(R + R.T))) + 1e-9
+        assert ub <= mu_2(C) + np.max(np.abs(np.linalg.eigvalsh(R + R.T))) + EIGVALSH_SLACK
     A = rng.normal(size=(3, 3))
     assert mu_2(A) <= mu2_interval_upper(A, A) <= mu_2(A) + RIGOROUS_EXCESS * 10
 
 
 # --------------------------------------------------------------- mu_2 of a constant matrix
 
-#: mpmath reference precision (digits) for eigenvalues of constant matrices
-MP_DPS = 50
 #: mu2_constant_bounds is accurate to a few ulps RELATIVE to mu_2 (roots isolated to 53 bits)
 CONSTANT_REL_WIDTH = 1e-14
+#: Arb enclosures of irrational entries widen the bounds by their radius only (observed 1.8e-15
+#: for a mu_2 of -0.68)
+ARB_ENTRY_WIDTH = 1e-14
+#: far below the float64 rounding of O(1) entries (~1e-16): a sign no float eigenvalue resolves
+BELOW_ROUNDING = 1e-20
+#: the exact mu_2 of TINY_2X2 is 6.46e-27: the lower bound keeps at least two digits of it
+TINY_2X2_LOWER = 6.4e-27
 
 
 def _mp_mu2(A) -> mp.mpf:
@@ -163,7 +174,7 @@ TINY_3X3 = np.array(
 @pytest.mark.parametrize("A", [TINY_2X2, TINY_3X3], ids=["2x2", "3x3"])
 def test_tiny_positive_mu2_keeps_its_sign(A):
     exact = _mp_mu2(A.tolist())
-    assert 0 < exact < 1e-20  # within rounding of 0, but positive: NOT contracting
+    assert 0 < exact < BELOW_ROUNDING  # within rounding of 0, but positive: NOT contracting
     # the old route: float eigvalsh says <= 0, i.e. "contracting with rate >= 0"
     assert mu_2(A) <= 0.0
     lo, hi = mu2_constant_bounds(A)
@@ -177,7 +188,7 @@ def test_tiny_2x2_has_the_closed_form_value():
         y, z = mp.mpf(_Y), -(1 + mp.mpf(2) ** -42)
         tr, det = -1 + z, -z - y * y
         lam = (tr + mp.sqrt(tr * tr - 4 * det)) / 2
-    assert lo <= lam <= hi and mp.mpf(lo) > 6.4e-27
+    assert lo <= lam <= hi and mp.mpf(lo) > TINY_2X2_LOWER
 
 
 def test_constant_bounds_contain_mpmath_eigenvalues_of_random_matrices():
@@ -205,7 +216,7 @@ def test_constant_bounds_of_sympy_matrices():
     lo, hi = mu2_constant_bounds(B)
     with mp.workdps(MP_DPS):
         exact = _mp_mu2([[-1, mp.sqrt(2)], [mp.pi / 10, -3]])
-    assert lo <= exact <= hi and hi - lo <= 1e-14
+    assert lo <= exact <= hi and hi - lo <= ARB_ENTRY_WIDTH
     with pytest.raises(SpecError, match="not constant"):
         mu2_constant_bounds(sp.Matrix([[sp.Symbol("x")]]))
 

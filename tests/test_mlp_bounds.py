@@ -28,6 +28,7 @@ from drip_cert.errors import SpecError
 from drip_cert.model.mlp import MLP, activation_fn, init_mlp
 from drip_cert.numerics.rounding import LIBM_REL, ndtr_rel_budget
 from drip_cert.provenance import How
+from tests.helpers import MP_DPS
 
 # a sup over a grid of spacing 1e-4 misses the true sup of a smooth function by O(h^2) ~ 1e-8
 GRID_SUP_TOL = 1e-7
@@ -44,6 +45,18 @@ LIPSDP_EXACT_TOL = 1e-4
 SCS_VS_CLARABEL = 1.05
 # the one-hidden-layer scalar Jacobian-Lipschitz bound is exact up to outward rounding (a few ulps)
 EXACT_REL_TOL = 1e-10
+# step of the central differences the Jacobian is compared with (see FD_TOL)
+FD_STEP = 1e-6
+# an Arb upper bound of a closed-form activation constant: a few ulps above it
+ARB_BOUND_REL = 1e-14
+# the same, absolute, for O(1) constants and sums of two of them
+ARB_BOUND_ATOL = 1e-14
+# an Arb upper bound of sup GELU' is above the exact value by at most its last ulp or so
+ARB_EXCESS = 1e-15
+# the brief quotes sup GELU' ~ 1.1289: four decimals
+BRIEF_DECIMALS = 1e-4
+# a degenerate box encloses the point value to a few ulps (outward rounding only)
+POINT_WIDTH = 1e-12
 
 ACTS = ("tanh", "gelu")
 
@@ -79,13 +92,15 @@ def test_activation_constants_match_dense_grid_of_autodiff(act):
 
 
 def test_activation_closed_forms():
-    assert activation_bounds("tanh").abs_curv == pytest.approx(4 / (3 * math.sqrt(3)), rel=1e-14)
+    assert activation_bounds("tanh").abs_curv == pytest.approx(
+        4 / (3 * math.sqrt(3)), rel=ARB_BOUND_REL
+    )
     gelu = activation_bounds("gelu")
-    assert gelu.abs_curv == pytest.approx(math.sqrt(2 / math.pi), rel=1e-14)
+    assert gelu.abs_curv == pytest.approx(math.sqrt(2 / math.pi), rel=ARB_BOUND_REL)
     # the brief's numbers: sup GELU' ~ 1.1289, inf GELU' ~ -0.1289, and they sum to 1 (GELU' is
     # Phi(z) + z phi(z), so GELU'(z) + GELU'(-z) = 1)
-    assert gelu.slope_hi == pytest.approx(1.1289, abs=1e-4)
-    assert gelu.slope_hi + gelu.slope_lo == pytest.approx(1.0, abs=1e-14)
+    assert gelu.slope_hi == pytest.approx(1.1289, abs=BRIEF_DECIMALS)
+    assert gelu.slope_hi + gelu.slope_lo == pytest.approx(1.0, abs=ARB_BOUND_ATOL)
     with pytest.raises(SpecError, match="relu"):
         activation_bounds("relu")
 
@@ -101,11 +116,10 @@ def test_jacobian_np_matches_jax_and_finite_differences(act):
         J = jacobian_np(net, x)
         Jax = np.asarray(jax.jit(jax.vmap(jax.jacfwd(net.apply_jax)))(jnp.asarray(x)))
         np.testing.assert_allclose(J, Jax, atol=AUTODIFF_TOL, rtol=0)
-        h = 1e-6
         for i in range(net.in_dim):
             e = np.zeros(net.in_dim)
-            e[i] = h
-            fd = (net.apply_np(x + e) - net.apply_np(x - e)) / (2 * h)
+            e[i] = FD_STEP
+            fd = (net.apply_np(x + e) - net.apply_np(x - e)) / (2 * FD_STEP)
             np.testing.assert_allclose(J[..., i], fd, atol=FD_TOL, rtol=0)
 
 
@@ -225,7 +239,7 @@ def test_enclosures_of_a_point_are_tight_and_of_wider_boxes_monotone():
     ylo, yhi = enclose_output(net, x, x)
     jlo, jhi = enclose_jacobian(net, x, x)
     # a degenerate box encloses the point value to a few ulps (outward rounding only)
-    assert np.max(yhi - ylo) < 1e-12 and np.max(jhi - jlo) < 1e-12
+    assert np.max(yhi - ylo) < POINT_WIDTH and np.max(jhi - jlo) < POINT_WIDTH
     w_prev = 0.0
     for r in (1e-3, 1e-2, 1e-1, 1.0):
         jl, jh = enclose_jacobian(net, x - r, x + r)
@@ -254,8 +268,6 @@ def test_box_errors_name_the_problem():
 
 # ----------------------------------------------------------------- rounding of activations
 
-#: mpmath reference precision (digits) for activation values
-MP_DPS = 50
 #: the old enclosures' relative pad (16 eps) and absolute pad (1e-300), reproduced as a contrast
 OLD_REL_PAD = 16.0 * np.finfo(np.float64).eps
 OLD_ABS_PAD = 1e-300
@@ -352,7 +364,7 @@ def test_activation_constants_are_arb_bounds_of_the_closed_forms():
         assert tanh.abs_curv >= 4 / (3 * mp.sqrt(3))
         assert gelu.slope_hi >= _mp_gelu_prime(s2) and gelu.slope_lo <= _mp_gelu_prime(-s2)
         assert gelu.abs_curv >= mp.sqrt(2 / mp.pi)
-        assert gelu.slope_hi - _mp_gelu_prime(s2) < 1e-15
+        assert gelu.slope_hi - _mp_gelu_prime(s2) < ARB_EXCESS
 
 
 def test_output_bound_and_products_are_rounded_up():

@@ -10,6 +10,11 @@ from scipy import stats
 
 from drip_cert._jax import jax, jnp
 from drip_cert.sim.noise import normals, normals_via_jax, threefry2x32
+from tests.helpers import MC_FIVE_SIGMA
+
+KS_PVALUE_MIN = 1e-3
+"""Kolmogorov-Smirnov p-value below which the draws are not standard normal: a false alarm is a
+1e-3 event for a correct generator, and the draws are fixed by the seed."""
 
 
 @pytest.mark.parametrize("seed", [0, 1, 12345, 2**31 - 1])
@@ -58,18 +63,18 @@ def test_normals_are_standard_normal_and_uncorrelated():
     """Moments, Kolmogorov-Smirnov and lag correlations on 2 x 10^5 seeded draws.
 
     Tolerances: with n = 2 x 10^5 the standard errors are 2.2e-3 (mean), 3.2e-3 (variance) and
-    2.2e-3 (a correlation); 5 standard errors make a false alarm a ~1e-6 event for a correct
+    2.2e-3 (a correlation); MC_FIVE_SIGMA of them make a false alarm a ~1e-6 event for a correct
     generator, and the draws are fixed by the seed, so the test is deterministic. The KS p-value
-    threshold 1e-3 likewise.
+    threshold KS_PVALUE_MIN likewise.
     """
     key = jax.random.PRNGKey(3)
     idx = jnp.arange(10_000, dtype=jnp.uint32)
     z = np.stack([np.asarray(normals(key, idx, jnp.uint32(j), 4)) for j in range(5)])  # (5, B, 4)
     flat = z.reshape(-1)
     n = flat.size
-    assert abs(flat.mean()) < 5 / math.sqrt(n)
-    assert abs(flat.var() - 1.0) < 5 * math.sqrt(2.0 / n)
-    assert stats.kstest(flat, "norm").pvalue > 1e-3
+    assert abs(flat.mean()) < MC_FIVE_SIGMA / math.sqrt(n)
+    assert abs(flat.var() - 1.0) < MC_FIVE_SIGMA * math.sqrt(2.0 / n)
+    assert stats.kstest(flat, "norm").pvalue > KS_PVALUE_MIN
     # across components, steps and neighbouring paths
     pairs = [
         (z[:, :, 0], z[:, :, 1]),
@@ -78,4 +83,4 @@ def test_normals_are_standard_normal_and_uncorrelated():
     ]
     for a, b in pairs:
         r = np.corrcoef(a.reshape(-1), b.reshape(-1))[0, 1]
-        assert abs(r) < 5 / math.sqrt(a.size), r
+        assert abs(r) < MC_FIVE_SIGMA / math.sqrt(a.size), r

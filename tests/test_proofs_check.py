@@ -4,15 +4,13 @@ from __future__ import annotations
 
 import json
 import re
-from pathlib import Path
 
 import pytest
 
 from proofs_check import Verdict, run_checks
 from proofs_check.__main__ import main
 from proofs_check._core import Context, make_rng
-
-ROOT = Path(__file__).resolve().parents[1]
+from tests.helpers import ROOT, by_name
 
 ERRATA = ROOT / "proofs_check" / "ERRATA.md"
 
@@ -37,7 +35,7 @@ def test_quick_suite_passes_or_documents_errata(quick_results):
 
 
 def test_expected_errata_are_found(quick_results):
-    by_name = {r.name: r for r in quick_results}
+    results = by_name(quick_results)
     for name in (
         "iss.perturbed_ode_statement",
         "tasil.rho_rate_delta",
@@ -45,7 +43,7 @@ def test_expected_errata_are_found(quick_results):
         "example.uncertainty_constants",
         "example.expert_contraction",
     ):
-        assert by_name[name].verdict is Verdict.ERRATUM, name
+        assert results[name].verdict is Verdict.ERRATUM, name
     for name in (
         "iss.young_step",
         "iss.bound_random_systems",
@@ -54,7 +52,7 @@ def test_expected_errata_are_found(quick_results):
         "l1drac.markov_step",
         "l1drac.propA1_monotone",
     ):
-        assert by_name[name].verdict is Verdict.PASS, name
+        assert results[name].verdict is Verdict.PASS, name
 
 
 def test_wrong_young_constant_fails():

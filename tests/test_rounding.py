@@ -53,8 +53,9 @@ from drip_cert.numerics.rounding import (
     up,
     widen_np,
 )
+from tests.helpers import MP_DPS
 
-mp.mp.dps = 50  # reference precision: 50 digits, far beyond the 16 of a float
+mp.mp.dps = MP_DPS  # reference precision (set globally for this module's mpmath references)
 
 #: a measured library error must stay below this fraction of its budget (the budgets carry a
 #: safety factor of 4 over the documented accuracy; half of it must remain on this platform)

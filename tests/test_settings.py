@@ -5,13 +5,11 @@ the value and the fix, no traceback); each settings class has one set of documen
 from __future__ import annotations
 
 import ast
-import glob
 import math
 from pathlib import Path
 
 import pytest
 
-from drip_cert.cli import main
 from drip_cert.errors import SpecError
 from drip_cert.spec import load_spec
 from drip_cert.spec.settings import (
@@ -23,33 +21,18 @@ from drip_cert.spec.settings import (
     SimSettings,
     TasilSettings,
 )
+from tests.helpers import EXAMPLES, ROOT, run_cli, two_state_spec, write_spec
 
-BASE = """
-[system]
-name = "settings-test"
-states = ["x1", "x2"]
-inputs = ["u1"]
-horizon = 10.0
-[dynamics]
-f = ["x2", "-x1 - x2**3"]
-g = [["0"], ["1"]]
-[policy]
-expert = ["-x1 - 2*x2"]
-[initial]
-support = [[-1.0, 1.0], [-1.0, 1.0]]
-"""
+BASE = two_state_spec("settings-test", uncertainty=False)
+"""A valid spec without settings tables; each test appends the table it checks."""
 
 
 def write(tmp_path, extra: str) -> Path:
-    p = tmp_path / "spec.toml"
-    p.write_text(BASE + "\n" + extra + "\n")
-    return p
+    return write_spec(tmp_path, BASE + "\n" + extra + "\n")
 
 
 def check_spec(capsys, path) -> tuple[int, str, str]:
-    code = main(["check-spec", str(path)])
-    out, err = capsys.readouterr()
-    return code, out, err
+    return run_cli(capsys, "check-spec", str(path))
 
 
 # (settings text, field as written, fragments the message must contain)
@@ -165,8 +148,7 @@ def test_unknown_key_in_every_table(tmp_path, capsys, table):
 
 @pytest.mark.parametrize("table", ["contraction", "l1drac", "tasil", "simulation", "constants"])
 def test_table_that_is_not_a_table(tmp_path, capsys, table):
-    p = tmp_path / "spec.toml"
-    p.write_text(f"{table} = 3\n" + BASE)
+    p = write_spec(tmp_path, f"{table} = 3\n" + BASE)
     code, _, err = check_spec(capsys, p)
     assert code == 2 and str(p) in err and "Traceback" not in err
 
@@ -268,21 +250,23 @@ def test_spec_rebuilt_from_tables_and_with_system(tmp_path):
 
 
 # ------------------------------------------------------------------ valid specs
-EXAMPLES = sorted(
-    p for p in glob.glob("examples/*/*.toml") if "l1drac_constants" not in p
+EXAMPLE_SPECS = sorted(
+    p.relative_to(ROOT).as_posix()
+    for p in EXAMPLES.glob("*/*.toml")
+    if p.parent.name != "l1drac_constants"
 )  # l1drac_constants holds a design-l1 constants file, not a spec
 
 
-@pytest.mark.parametrize("path", EXAMPLES)
+@pytest.mark.parametrize("path", EXAMPLE_SPECS)
 def test_examples_pass_check_spec(capsys, path):
-    code, out, err = check_spec(capsys, path)
+    code, out, err = check_spec(capsys, ROOT / path)
     assert code == 0, err
     assert "OK" in out
 
 
 def test_readme_settings_tables_are_valid(tmp_path):
     """The settings tables of the README's spec example load."""
-    text = Path("README.md").read_text()
+    text = (ROOT / "README.md").read_text()
     block = text[text.index("[constants]                    # optional") :]
     block = block[: block.index("```")]
     spec = load_spec(write(tmp_path, block))
@@ -309,7 +293,7 @@ def test_uncertainty_constants_validates_a_plain_mapping(tmp_path):
 
 def test_settings_module_is_in_the_spec_layer():
     """drip_cert.spec.settings imports only errors, provenance and numerics."""
-    tree = ast.parse(Path("drip_cert/spec/settings.py").read_text())
+    tree = ast.parse((ROOT / "drip_cert" / "spec" / "settings.py").read_text())
     mods = set()
     for node in ast.walk(tree):
         if isinstance(node, ast.ImportFrom) and node.module:

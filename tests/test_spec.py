@@ -10,34 +10,18 @@ import sympy as sp
 from drip_cert.errors import SpecError
 from drip_cert.model.mlp import init_mlp
 from drip_cert.spec import load_spec
+from tests.helpers import PAPER_4D_SPEC, two_state_spec, write_spec
 
-MINIMAL = """
-[system]
-name = "example"
-states = ["x1", "x2"]
-inputs = ["u1"]
-horizon = 10.0
-[dynamics]
-f = ["x2", "-x1 - x2**3"]
-g = [["0"], ["1"]]
-[policy]
-expert = ["-x1 - 2*x2"]
-[uncertainty]
-drift = ["0.1*sin(x1)", "0.1"]
-diffusion = [["0.05", "0"], ["0", "0.05"]]
-[initial]
-support = [[-1.0, 1.0], [-1.0, 1.0]]
-"""
+MINIMAL = two_state_spec()
+"""The issue's minimal spec shape (two states, one input, drift and diffusion)."""
 
-
-def write(tmp_path, text, name="spec.toml"):
-    p = tmp_path / name
-    p.write_text(text)
-    return p
+LOWERED_ATOL = 1e-15
+"""The lowered (numeric) functions and a numpy formula evaluate the same float64 operations on
+O(1) numbers, up to an ulp of reordering."""
 
 
 def test_minimal_issue_spec_loads(tmp_path):
-    spec = load_spec(write(tmp_path, MINIMAL))
+    spec = load_spec(write_spec(tmp_path, MINIMAL))
     s = spec.system
     assert (s.n, s.m, s.d) == (2, 1, 2)
     x1, x2 = s.states
@@ -47,17 +31,18 @@ def test_minimal_issue_spec_loads(tmp_path):
 
 
 def test_numeric_functions_match_symbolic(tmp_path):
-    s = load_spec(write(tmp_path, MINIMAL)).system
+    s = load_spec(write_spec(tmp_path, MINIMAL)).system
     x = np.array([0.4, -0.3])
     num = s.numeric
     fx = np.asarray(num.f(0.0, x))
-    assert np.allclose(fx, [x[1], -x[0] - x[1] ** 3], rtol=0, atol=1e-15)
-    assert np.allclose(np.asarray(num.lam_mu(0.0, x)), [0.1 * np.sin(0.4), 0.1], atol=1e-15)
-    assert np.allclose(np.asarray(num.theta_ad(0.0)), [[0.0, 1.0]])
+    assert np.allclose(fx, [x[1], -x[0] - x[1] ** 3], rtol=0, atol=LOWERED_ATOL)
+    lam_mu = np.asarray(num.lam_mu(0.0, x))
+    assert np.allclose(lam_mu, [0.1 * np.sin(0.4), 0.1], rtol=0, atol=LOWERED_ATOL)
+    assert np.allclose(np.asarray(num.theta_ad(0.0)), [[0.0, 1.0]], rtol=0, atol=LOWERED_ATOL)
 
 
 def test_paper_example_loads_and_expert_cancels_h():
-    spec = load_spec("drip_cert/data/paper_4d/paper_4d.toml")
+    spec = load_spec(PAPER_4D_SPEC)
     J = spec.system.closed_loop_jacobian("expert")
     assert J == -sp.Rational(1, 10) * sp.eye(4)
 
@@ -121,7 +106,7 @@ def test_paper_example_loads_and_expert_cancels_h():
 )
 def test_bad_specs_raise_spec_error_naming_the_field(tmp_path, old, new, field, fragment):
     assert old in MINIMAL
-    path = write(tmp_path, MINIMAL.replace(old, new, 1))
+    path = write_spec(tmp_path, MINIMAL.replace(old, new, 1))
     with pytest.raises(SpecError) as info:
         load_spec(path)
     msg = str(info.value)
@@ -132,7 +117,7 @@ def test_bad_specs_raise_spec_error_naming_the_field(tmp_path, old, new, field, 
 
 def test_not_toml(tmp_path):
     with pytest.raises(SpecError, match="not valid TOML"):
-        load_spec(write(tmp_path, "[system\nname="))
+        load_spec(write_spec(tmp_path, "[system\nname="))
 
 
 def test_missing_file(tmp_path):
@@ -163,29 +148,29 @@ support = [[-1.0, 1.0], [-1.0, 1.0]]
 
 def test_block_spec_loads_and_cancels(tmp_path):
     init_mlp([2, 5, 2], np.random.default_rng(1)).save(tmp_path / "h.npz")
-    s = load_spec(write(tmp_path, BLOCK_SPEC.format(weights="h.npz"))).system
+    s = load_spec(write_spec(tmp_path, BLOCK_SPEC.format(weights="h.npz"))).system
     assert s.closed_loop_jacobian() == -sp.eye(2)
     x = np.array([0.2, 0.1])
     h = s.blocks["h"].evaluate_np(x)
-    assert np.allclose(np.asarray(s.numeric.f(0.0, x)), -x + h, atol=1e-15)
+    assert np.allclose(np.asarray(s.numeric.f(0.0, x)), -x + h, rtol=0, atol=LOWERED_ATOL)
 
 
 def test_missing_weights_file(tmp_path):
     with pytest.raises(SpecError, match="does not exist") as info:
-        load_spec(write(tmp_path, BLOCK_SPEC.format(weights="absent.npz")))
+        load_spec(write_spec(tmp_path, BLOCK_SPEC.format(weights="absent.npz")))
     assert "blocks.h.weights" in str(info.value)
 
 
 def test_weights_of_wrong_shape(tmp_path):
     init_mlp([3, 5, 2], np.random.default_rng(1)).save(tmp_path / "h.npz")
     with pytest.raises(SpecError, match="takes 3 inputs but the block declares 2"):
-        load_spec(write(tmp_path, BLOCK_SPEC.format(weights="h.npz")))
+        load_spec(write_spec(tmp_path, BLOCK_SPEC.format(weights="h.npz")))
 
 
 def test_weights_file_with_pickles_is_refused(tmp_path):
     np.savez(tmp_path / "h.npz", W0=np.array([object()], dtype=object), b0=np.zeros(2))
     with pytest.raises(SpecError, match="without pickles"):
-        load_spec(write(tmp_path, BLOCK_SPEC.format(weights="h.npz")))
+        load_spec(write_spec(tmp_path, BLOCK_SPEC.format(weights="h.npz")))
 
 
 def test_rank_deficient_g_says_the_rank(tmp_path):
@@ -195,5 +180,5 @@ def test_rank_deficient_g_says_the_rank(tmp_path):
         .replace('expert = ["-x1 - 2*x2"]', 'expert = ["-x1", "-x2"]')
     )
     with pytest.raises(SpecError, match=r"rank 1 < m = 2") as info:
-        load_spec(write(tmp_path, text))
+        load_spec(write_spec(tmp_path, text))
     assert "dynamics.g" in str(info.value)

@@ -2,8 +2,8 @@
 
 Each test builds per-path gap norms ``r`` (paths x recorded times) with a seeded generator, turns
 them into the engine's statistics with :mod:`drip_cert.numerics.stats`, and calls the check
-functions
-directly: no simulation, except the last test, which runs ``drip-cert validate --quick``.
+functions directly: no simulation, except the last test, which runs ``drip-cert validate --quick``
+(the quick suite's one end-to-end run of that command).
 """
 
 from __future__ import annotations
@@ -34,6 +34,7 @@ from drip_cert.validate.checks import (
     checks_from_result,
     overall_status,
 )
+from tests.helpers import by_name, example_spec, run_cli
 
 LEVEL = 0.95
 """The engine's default confidence level (SimConfig.ci_level)."""
@@ -55,6 +56,13 @@ RHO_TASIL, DELTA_TASIL = 1.0, 0.1
 RHO_L1, P, KAPPA, DELTA_L1 = 0.5, 1, 2.0, 0.2
 """Certified numbers of the synthetic certificate (any positive values; kappa >= rho_L1 as in
 L1-DRAC (130a), kappa = rho_L1 delta^(-1/(2p)) = 0.5 * 0.2^(-1/2) ~ 1.1, rounded up)."""
+
+COUNT_TOL = 0.5 / N_PATHS
+"""A frequency is (count of paths) / N_PATHS: less than half a path's share means the count is
+exact."""
+
+FLOAT_ATOL = 1e-15
+"""The same few float64 operations on numbers in [0, 1], in another order: an ulp or two."""
 
 
 def _stats(name: str, r: np.ndarray, valid: np.ndarray | None = None, p_max: int = 4):
@@ -105,16 +113,12 @@ def _certified(**kw):
     return {**args, **kw}
 
 
-def _by_name(checks):
-    return {c.name: c for c in checks}
-
-
 # ---------------------------------------------------------------------------------- statuses
 
 
 def test_within_bounds_holds():
     res = _result(_small(0, 0.05), _small(1, 0.05), _small(2, 0.1))
-    checks = _by_name(checks_from_result(res, **_certified()))
+    checks = by_name(checks_from_result(res, **_certified()))
     for name in (
         "policy_radius",
         "uncertainty_gap",
@@ -146,7 +150,7 @@ def test_nothing_finite_checked_is_nothing_checked():
 
 def test_vacuous_tasil_radius_is_not_checked():
     res = _result(_small(0, 0.05), _small(1, 0.05), _small(2, 0.1))
-    checks = _by_name(checks_from_result(res, **_certified(rho_tasil=math.inf)))
+    checks = by_name(checks_from_result(res, **_certified(rho_tasil=math.inf)))
     assert checks["policy_radius"].status == NOT_CHECKED
     assert "vacuous" in checks["policy_radius"].reason
     # the total needs rho_TaSIL too; the L1 checks do not
@@ -174,7 +178,7 @@ def test_nan_empirical_is_not_checked_never_holds():
 
 def test_not_at_certified_parameters_never_counts_but_the_policy_radius_does():
     res = _result(_small(0, 0.05), _small(1, 0.05), _small(2, 0.1))
-    checks = _by_name(
+    checks = by_name(
         checks_from_result(
             res, **_certified(), at_certified_l1=False, not_certified_why="practical T_s"
         )
@@ -197,10 +201,10 @@ def test_radius_violated_although_the_mean_is_below_rho():
     when = rng.integers(1, N_TIMES, size=out.size)  # ...each at one (random) time
     policy[out, when] = 2.0 * RHO_TASIL
     res = _result(policy, _small(1, 0.05), _small(2, 0.1))
-    checks = _by_name(checks_from_result(res, **_certified()))
+    checks = by_name(checks_from_result(res, **_certified()))
     rad = checks["policy_radius"]
     assert rad.status == VIOLATED and rad.holds is False
-    assert rad.extra["exceed_frequency"] == pytest.approx(0.3, abs=0.5 / N_PATHS)
+    assert rad.extra["exceed_frequency"] == pytest.approx(0.3, abs=COUNT_TOL)
     assert rad.extra["exceed_confidence_low"] > DELTA_TASIL
     # the same test in radius units: the lower confidence bound of the 0.9-quantile exceeds rho
     assert rad.confidence_low > RHO_TASIL and rad.empirical == 2.0 * RHO_TASIL
@@ -233,23 +237,23 @@ def test_total_uses_rho_tasil_plus_kappa_and_delta_sum():
     hit = rng.permutation(N_PATHS)[: int(0.28 * N_PATHS)]
     total[hit, 1:] = 1.01 * thr
     res = _result(_small(0, 0.05), _small(1, 0.05), total)
-    tot = _by_name(checks_from_result(res, **_certified()))["total_tail"]
+    tot = by_name(checks_from_result(res, **_certified()))["total_tail"]
     assert tot.extra["threshold"] == thr
-    assert tot.bound == pytest.approx(DELTA_TASIL + DELTA_L1, abs=1e-15)
-    assert tot.empirical == pytest.approx(0.28, abs=0.5 / N_PATHS)
+    assert tot.bound == pytest.approx(DELTA_TASIL + DELTA_L1, abs=FLOAT_ATOL)
+    assert tot.empirical == pytest.approx(0.28, abs=COUNT_TOL)
     assert tot.status == HOLDS
     # the lower bound exceeds delta_L1 alone: the union bound is what makes it hold
     assert tot.confidence_low > DELTA_L1
     # at 50% beyond the threshold even delta_TaSIL + delta_L1 is exceeded
     total[rng.permutation(N_PATHS)[: N_PATHS // 2], 1:] = 1.01 * thr
     res = _result(_small(0, 0.05), _small(1, 0.05), total)
-    tot = _by_name(checks_from_result(res, **_certified()))["total_tail"]
+    tot = by_name(checks_from_result(res, **_certified()))["total_tail"]
     assert tot.status == VIOLATED
     # the frequency just AT the threshold counts too: (130a) and the union bound are for ">="
     total = _small(2, 0.1)
     total[: N_PATHS // 2, 1:] = thr
     res = _result(_small(0, 0.05), _small(1, 0.05), total)
-    assert _by_name(checks_from_result(res, **_certified()))["total_tail"].status == VIOLATED
+    assert by_name(checks_from_result(res, **_certified()))["total_tail"].status == VIOLATED
 
 
 def test_l2p_norm_uses_a_lower_confidence_bound():
@@ -260,16 +264,16 @@ def test_l2p_norm_uses_a_lower_confidence_bound():
     l2 = np.sqrt(np.mean(r**2, axis=0))
     r *= RHO_L1 * (1.0 + NOISE_EXCESS) / l2.max()
     res = _result(_small(0, 0.05), r, _small(2, 0.1))
-    lp = _by_name(checks_from_result(res, **_certified()))["uncertainty_L2_norm"]
+    lp = by_name(checks_from_result(res, **_certified()))["uncertainty_L2_norm"]
     assert lp.empirical > RHO_L1  # the point estimate says "above the bound"...
     assert lp.confidence_low < RHO_L1  # ...the lower confidence bound does not
     assert lp.status == HOLDS
     # a clear excess is a violation
     res = _result(_small(0, 0.05), 1.5 * r, _small(2, 0.1))
-    lp = _by_name(checks_from_result(res, **_certified()))["uncertainty_L2_norm"]
+    lp = by_name(checks_from_result(res, **_certified()))["uncertainty_L2_norm"]
     assert lp.status == VIOLATED and lp.confidence_low > RHO_L1
     # the mean gap against rho_L1 is the weaker (E|.| <= L_2p) comparison of the same sample
-    mean = _by_name(checks_from_result(res, **_certified()))["uncertainty_gap"]
+    mean = by_name(checks_from_result(res, **_certified()))["uncertainty_gap"]
     assert mean.empirical < lp.empirical
 
 
@@ -278,9 +282,9 @@ def test_tail_frequency_clopper_pearson_with_bonferroni():
     counts[7] = 0.3 * N_PATHS
     c = check_tail("t", counts, N_PATHS, KAPPA, DELTA_L1, LEVEL, times=TIMES)
     per_t = 1.0 - (1.0 - LEVEL) / N_TIMES
-    assert c.extra["per_time_level"] == pytest.approx(per_t, abs=1e-15)
+    assert c.extra["per_time_level"] == pytest.approx(per_t, abs=FLOAT_ATOL)
     assert c.confidence_low == pytest.approx(
-        float(clopper_pearson_lower(counts[7], N_PATHS, per_t)), abs=1e-15
+        float(clopper_pearson_lower(counts[7], N_PATHS, per_t)), abs=FLOAT_ATOL
     )
     assert c.extra["time"] == TIMES[7] and c.status == VIOLATED
 
@@ -304,21 +308,18 @@ def test_diverged_paths_make_a_hold_inconclusive_but_not_a_violation():
 
 
 def test_cli_validate_exit_status_matches_report_status(capsys):
-    from drip_cert.cli import main
-
-    code = main(
-        [
-            "validate",
-            "examples/infeasible_2d/infeasible_2d.toml",
-            "--quick",
-            "--json",
-            "--trajectories",
-            "50",
-            "--seed",
-            "0",
-        ]
+    code, out, _ = run_cli(
+        capsys,
+        "validate",
+        str(example_spec("infeasible_2d")),
+        "--quick",
+        "--json",
+        "--trajectories",
+        "50",
+        "--seed",
+        "0",
     )
-    rep = json.loads(capsys.readouterr().out)
+    rep = json.loads(out)
     assert rep["status"] in (HOLDS, VIOLATED, NOTHING_CHECKED)
     assert rep["holds"] is (rep["status"] == HOLDS)
     assert code == (0 if rep["status"] == HOLDS else 1)

@@ -28,6 +28,7 @@ import numpy as np
 import sympy as sp
 
 from drip_cert.analysis.constants import batch_fn
+from drip_cert.analysis.mlp_bounds import enclose_output, lipschitz_bound
 from drip_cert.model.blocks import block_applications
 from drip_cert.model.mlp import MLP
 from drip_cert.model.system import System
@@ -142,8 +143,6 @@ def _box_radius_up(box: np.ndarray) -> float:
 def _f_at_zero_up(dec: AffineBlocks, s: System) -> float:
     """Upper bound of ``||F(0)|| = ||c + sum_k C_k h_k(0)||``: each ``h_k(0)`` enclosed by
     interval bound propagation, the affine combination in interval arithmetic."""
-    from drip_cert.analysis.mlp_bounds import enclose_output
-
     c = np.asarray(dec.c, dtype=float)
     rad_c = CONVERSION_ULPS * np.spacing(np.abs(c))  # the conversion of the true c to floats
     lo = sub_down_np(c, rad_c)
@@ -194,8 +193,6 @@ def closed_loop_constants(
     global_rate
         Whether ``lam`` holds on all of ``R^n`` (needed for a sound ``Delta_star``).
     """
-    from drip_cert.analysis.mlp_bounds import lipschitz_bound
-
     F = s.closed_loop(which)
     box = np.array(s.support, dtype=float)
     r0 = _box_radius_up(box)

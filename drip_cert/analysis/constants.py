@@ -30,8 +30,12 @@ from typing import Any
 import numpy as np
 import sympy as sp
 
+from drip_cert.analysis.growth import growth_bound, holder_half_bound, lipschitz_bound, sup_bound
+from drip_cert.analysis.lognorm import mu2_interval_upper
 from drip_cert.model.system import System
-from drip_cert.provenance import How, Quantity
+from drip_cert.numerics.interval import enclose_expr, interval_add, interval_mul
+from drip_cert.numerics.rounding import mul_up, sqrt_down, sqrt_up, sum_sq_up
+from drip_cert.provenance import How, Quantity, Scope
 from drip_cert.spec.settings import ConstantsTable
 
 
@@ -95,8 +99,6 @@ def _time_pieces(s: System, mats) -> list[tuple[float, float]]:
 
 def _enclose_t(M: sp.MatrixBase, t: sp.Symbol, piece: tuple[float, float]):
     """Entry-wise rigorous enclosure ``(lo, hi)`` of a matrix of ``t`` over ``piece``."""
-    from drip_cert.numerics.interval import enclose_expr
-
     lo = np.empty(M.shape)
     hi = np.empty(M.shape)
     for i in range(M.shape[0]):
@@ -107,16 +109,12 @@ def _enclose_t(M: sp.MatrixBase, t: sp.Symbol, piece: tuple[float, float]):
 
 def _fro_up(lo: np.ndarray, hi: np.ndarray) -> float:
     """Upper bound of ``||M||_F`` over the interval matrix (outward rounded)."""
-    from drip_cert.numerics.rounding import sqrt_up, sum_sq_up
-
     return sqrt_up(sum_sq_up(np.maximum(np.abs(lo), np.abs(hi)).ravel()))
 
 
 def _spectral_up(lo: np.ndarray, hi: np.ndarray) -> float:
     """Upper bound of ``||M||_2`` over the interval matrix: ``lambda_max`` of the symmetric
     dilation ``[[0, M], [M^T, 0]]`` (its eigenvalues are ``+-sigma_i`` and zeros)."""
-    from drip_cert.analysis.lognorm import mu2_interval_upper
-
     r, c = lo.shape
     Lo = np.zeros((r + c, r + c))
     Hi = np.zeros((r + c, r + c))
@@ -129,10 +127,6 @@ def _sigma_min_down(lo: np.ndarray, hi: np.ndarray) -> float:
     """Lower bound of ``sigma_min(M)`` (M tall, n x m) over the interval matrix:
     ``sqrt(lambda_min(M^T M))``, ``M^T M`` enclosed by interval products and
     ``lambda_min(S) = -lambda_max(-S) >= -mu2_upper(-S)``."""
-    from drip_cert.analysis.lognorm import mu2_interval_upper
-    from drip_cert.numerics.interval import interval_add, interval_mul
-    from drip_cert.numerics.rounding import sqrt_down
-
     n, m = lo.shape
     Glo = np.empty((m, m))
     Ghi = np.empty((m, m))
@@ -153,9 +147,6 @@ def input_constants(s: System) -> InputConstants:
     ``how = exact``); for a time-varying ``g`` the suprema over ``[0, T]`` are interval bounds over
     :data:`TIME_PIECES` pieces (``how = sound``, scope ``t in [0, T]``).
     """
-    from drip_cert.numerics.rounding import sqrt_up
-    from drip_cert.provenance import Scope
-
     g = sp.Matrix(s.g)
     th = sp.Matrix(s.theta_ad)
     gdot = g.diff(s.t)
@@ -216,7 +207,7 @@ def input_constants(s: System) -> InputConstants:
 # ---------------------------------------------------------------------- sampled sup estimates
 def batch_fn(s: System, exprs: sp.MatrixBase) -> Callable[[float, np.ndarray], np.ndarray]:
     """numpy-facing batched evaluation ``(t, X (N, n)) -> (N, ...)`` of system expressions."""
-    from drip_cert._jax import jax, jnp
+    from drip_cert._jax import jax, jnp  # jax: keep off the API's import path
 
     fn = jax.jit(jax.vmap(s.lower(exprs), in_axes=(None, 0)))
 
@@ -295,8 +286,6 @@ def uncertainty_constants(
             if given_bound is not None and key != "p":
                 # only the bound is known: matched/unmatched parts bounded through the norms of
                 # Theta_ad and g_perp^T (||Theta Lambda|| <= sup_t ||Theta(t)||_2 ||Lambda||)
-                from drip_cert.numerics.rounding import mul_up
-
                 gb = Quantity(
                     f"Delta_{key}", given_bound, How.GIVEN, growth_src, "given in [uncertainty]"
                 )
@@ -338,13 +327,6 @@ def uncertainty_constants(
         # the unmatched part g_perp^T Lambda has the norms of P_perp Lambda (see
         # System.perp_projector): a closed form in t also for a time-varying g
         perp = sp.Matrix(pperp) * full if n > m else None
-        from drip_cert.analysis.growth import (
-            growth_bound,
-            holder_half_bound,
-            lipschitz_bound,
-            sup_bound,
-        )
-
         t_sym = s.t if len(times) > 1 else None
         t_rng = (0.0, float(s.horizon)) if len(times) > 1 else (0.0, 0.0)
         for sub, expr in (("", full), ("_par", par), ("_perp", perp)):

@@ -101,7 +101,7 @@ class InvariantSet:
 def _near_equilibrium(F_num, x_start: np.ndarray) -> np.ndarray:
     """A point where ``F(0, x)`` is small (float root search from ``x_start``; any point is
     valid for the proof, a good one only makes ``eps`` small)."""
-    from scipy.optimize import root
+    from scipy.optimize import root  # scipy.optimize: keep off the API's import path
 
     try:
         sol = root(lambda z: np.asarray(F_num(z), dtype=float), x_start, method="hybr")

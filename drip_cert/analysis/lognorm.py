@@ -29,6 +29,7 @@ import sympy as sp
 from flint import arb, arb_mat, fmpq, fmpq_mat
 
 from drip_cert.errors import SpecError
+from drip_cert.numerics.interval import UnsupportedExpression, enclose_expr
 from drip_cert.numerics.rounding import arb_hi, arb_lo, sym_lambda_max_upper
 
 __all__ = [
@@ -278,8 +279,6 @@ def _exact_entries(
             raise SpecError(f"expected a square matrix, got shape {C.shape}", field="A")
         Q = [[_fmpq(v) if math.isfinite(v) else fmpq(0) for v in row] for row in C]
         return C, Q, np.zeros_like(C), np.zeros_like(C)
-    from drip_cert.numerics.interval import UnsupportedExpression, enclose_expr
-
     n, m = A.shape
     C, R, Rf = np.zeros((n, m)), np.zeros((n, m)), np.zeros((n, m))
     Q = []

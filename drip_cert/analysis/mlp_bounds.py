@@ -131,7 +131,7 @@ def _consts() -> dict[str, float | tuple[float, float]]:
     # signs are verified in Arb; GELU' < 0 on (-inf, z*) and > 0 on (z*, inf) (see
     # activation_bounds), so z* in [a, b], and for z in [a, b] (all < 0)
     # z Phi(z) >= a Phi(z) >= a Phi(b): a rigorous lower bound of min GELU
-    from scipy.optimize import brentq
+    from scipy.optimize import brentq  # scipy.optimize: keep off the API's import path
 
     zs = float(brentq(lambda z: float(_gelu_prime(z)), -1.0, -0.5, xtol=1e-15))
     a, b = zs - 1e-12, zs + 1e-12
@@ -389,7 +389,7 @@ def lipschitz_lipsdp(
     max_dim
         Above this ``d`` LipSDP is skipped (status ``"too_large"``) and the product bound is used.
     """
-    import cvxpy as cp
+    import cvxpy as cp  # cvxpy: keep off the API's import path
 
     product = lipschitz_product(mlp).value
     if len(mlp.weights) < 2:

@@ -14,7 +14,10 @@ import math
 import numpy as np
 import sympy as sp
 
+from drip_cert.analysis.closed_loop import affine_in_blocks
+from drip_cert.analysis.mlp_bounds import jacobian_lipschitz_bound
 from drip_cert.model.system import System
+from drip_cert.numerics.interval import UnsupportedExpression, enclose_expr
 from drip_cert.numerics.rounding import add_up, mul_up, spectral_norm_upper, sq_up, sqrt_up
 from drip_cert.provenance import How, Quantity, Scope
 
@@ -32,9 +35,6 @@ def jacobian_lipschitz(s: System, which: str, box: np.ndarray | None = None) -> 
     (``||d^2 pi|| <= ||d^2 pi||_F``), valid on that box only; anything else is a sampled
     estimate of ``sup ||d^2 pi||_F`` (labelled so).
     """
-    from drip_cert.analysis.closed_loop import affine_in_blocks
-    from drip_cert.analysis.mlp_bounds import jacobian_lipschitz_bound
-
     pol = sp.Matrix(s.policy(which))
     jump, branch = _kink_branches(pol, s, box)
     if jump is not None:
@@ -77,8 +77,6 @@ def jacobian_lipschitz(s: System, which: str, box: np.ndarray | None = None) -> 
             + " (layerwise product-rule bound, global)",
         )
     if box is not None and not s.blocks:
-        from drip_cert.numerics.interval import UnsupportedExpression, enclose_expr
-
         # on the box each Abs(a) is its smooth branch +-a (no DiracDelta in d^2 pi)
         pol_box = pol if branch is None else pol.replace(sp.Abs, branch)
         try:
@@ -105,7 +103,7 @@ def jacobian_lipschitz(s: System, which: str, box: np.ndarray | None = None) -> 
         except UnsupportedExpression:
             pass
     # sampled estimate of sup ||Hessian||_F on the support box enlarged by 1
-    from drip_cert._jax import jax, jnp
+    from drip_cert._jax import jax, jnp  # jax: keep off the API's import path
 
     fn = s.lower(list(pol))
     hess = jax.jit(jax.vmap(jax.hessian(lambda z: fn(0.0, z))))
@@ -145,8 +143,6 @@ def _kink_branches(pol: sp.Matrix, s: System, box: np.ndarray | None):
     else None. ``branch`` is None without kinks; when every kink is proved off the box it maps
     an ``Abs`` argument ``a`` to its branch there (``a`` or ``-a``), for ``pol.replace``.
     """
-    from drip_cert.numerics.interval import UnsupportedExpression, enclose_expr
-
     signs: dict[sp.Expr, int] = {}
     for a in _kinks(pol, s):
         if box is None:

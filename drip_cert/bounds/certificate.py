@@ -18,14 +18,17 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from drip_cert.analysis.block_enclosure import block_enclose_callback
 from drip_cert.analysis.constants import (
     InputConstants,
     UncertaintyConstants,
     input_constants,
     uncertainty_constants,
 )
-from drip_cert.analysis.contraction import ContractionResult
+from drip_cert.analysis.contraction import ContractionResult, contraction_rate
 from drip_cert.analysis.invariance import InvariantSet, best_invariant_set
+from drip_cert.analysis.iss import delta_iss
+from drip_cert.bounds.l1drac.system import l1_section
 from drip_cert.errors import AssumptionViolation, DripCertError
 from drip_cert.model.system import System
 from drip_cert.numerics.rounding import div_up, mul_up, up
@@ -63,10 +66,8 @@ def analyse_contraction(s: System, which: str, opts: ContractionSettings) -> Con
     Implements the check of DRIP Assumption 2 (expert) and L1-DRAC Assumption 2 (learned closed
     loop, the nominal system of the L1-DRAC layer).
     """
-    from drip_cert._jax import jax, jnp
-    from drip_cert.analysis.block_enclosure import block_enclose_callback
-    from drip_cert.analysis.contraction import contraction_rate
-    from drip_cert.analysis.lmi import contraction_metric
+    from drip_cert._jax import jax, jnp  # jax: keep off the API's import path
+    from drip_cert.analysis.lmi import contraction_metric  # cvxpy: keep off the API's import path
 
     J = s.closed_loop_jacobian(which)
     box = np.array(opts.region if opts.region is not None else s.support, dtype=float)
@@ -306,8 +307,7 @@ def _invariance(s: System, r: Any) -> InvariantSet | None:
     rate is global or not positive)."""
     if r.scope.all_x or not r.holds or not r.how.proved:
         return None
-    from drip_cert._jax import jnp
-    from drip_cert.analysis.block_enclosure import block_enclose_callback
+    from drip_cert._jax import jnp  # jax: keep off the API's import path
 
     num = s.numeric
 
@@ -356,7 +356,7 @@ def certify(
     if isinstance(spec, System):
         spec = Spec(None, spec)
     if policy is not None:
-        from drip_cert.learn.imitation import learned_system
+        from drip_cert.learn.imitation import learned_system  # jax: keep off the API's import path
 
         spec = spec.with_system(learned_system(spec.system, policy))
     stage = Stages("certify", enabled=progress)
@@ -450,8 +450,6 @@ def certify(
     diss = None
     gamma0 = None
     if r.holds:
-        from drip_cert.analysis.iss import delta_iss
-
         try:
             diss = delta_iss(lam_ex, ic.Delta_g, ic.Delta_g_spectral)
         except AssumptionViolation as exc:  # pragma: no cover - guarded by r.holds
@@ -472,8 +470,12 @@ def certify(
     tasil = None
     wants_tasil = "tasil" in settings.present or demonstrations is not None
     if s.learned is not None and wants_tasil and gamma0 is not None:
-        from drip_cert.bounds.tasil.section import tasil_section
-        from drip_cert.learn.imitation import demonstration_set
+        from drip_cert.bounds.tasil.section import (  # jax: keep off the API's import path
+            tasil_section,
+        )
+        from drip_cert.learn.imitation import (  # jax: keep off the API's import path
+            demonstration_set,
+        )
 
         st = settings.tasil
         stage("TaSIL section (demonstrations, h0 and h1 along them, the bound)")
@@ -509,8 +511,6 @@ def certify(
         checks.append(tcheck.with_scope(*_tasil_scope(r, inv, tasil, s.horizon)))
     l1 = None
     if wants_l1:
-        from drip_cert.bounds.l1drac.system import l1_section
-
         stage("L1-DRAC constants, design and its verification in Arb")
         lam_q = src.euclidean.to_quantity()
         est = -src.euclidean.max_mu_sampled

@@ -16,6 +16,7 @@ from typing import Any
 
 import numpy as np
 
+from drip_cert._jax import jax
 from drip_cert.errors import SpecError
 from drip_cert.learn.data import Demonstrations, generate_demonstrations
 from drip_cert.model.blocks import mlp_block
@@ -45,8 +46,6 @@ def demonstrations(s: System, n: int, k: int, seed: int, stream: int = 0) -> Dem
     """``n`` expert trajectories of the nominal model from ``xi_i ~ D`` (uniform on the box),
     sampled on the uniform partition of ``[0, T]`` with ``k`` intervals (DRIP Def. "Training
     Data"). ``stream`` separates training (0) from held-out (1) draws of the same seed."""
-    from drip_cert._jax import jax
-
     key = jax.random.fold_in(jax.random.PRNGKey(seed), stream)
     return generate_demonstrations(
         nominal_field(s), s.numeric.expert, np.array(s.support), n, s.horizon, k, key
@@ -122,7 +121,7 @@ def train_on_system(
     ``demonstrations`` are drawn by :func:`demonstration_set` from ``settings`` when not given;
     training uses ``settings.seed`` for its own randomness (initialisation, batches).
     """
-    from drip_cert.learn.tasil import train_policy
+    from drip_cert.learn.tasil import train_policy  # optax: keep off the API's import path
 
     method = method or settings.method
     demos = demonstration_set(s, settings) if demonstrations is None else demonstrations

@@ -115,19 +115,19 @@ class Block:
 
     def jacobian_fn(self) -> Callable[[Any], Any]:
         """jax map ``z -> d fn / dz`` of shape ``(out_dim, in_dim)``."""
-        from drip_cert._jax import jax
+        from drip_cert._jax import jax  # jax: keep off the CLI start-up path
 
         return jax.jacfwd(self.fn)
 
     def hessian_fn(self) -> Callable[[Any], Any]:
         """jax map ``z -> d^2 fn / dz^2`` of shape ``(out_dim, in_dim, in_dim)``."""
-        from drip_cert._jax import jax
+        from drip_cert._jax import jax  # jax: keep off the CLI start-up path
 
         return jax.jacfwd(jax.jacrev(self.fn))
 
     def evaluate_np(self, z: np.ndarray) -> np.ndarray:
         """Evaluate on a batch ``(N, in_dim)`` (or one point) and return numpy."""
-        from drip_cert._jax import jax, jnp
+        from drip_cert._jax import jax, jnp  # jax: keep off the CLI start-up path
 
         z = jnp.asarray(z, dtype=jnp.float64)
         if z.ndim == 1:

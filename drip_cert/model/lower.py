@@ -49,7 +49,7 @@ def lower(
     callable
         ``fn(t, x)`` with ``x`` of shape ``(n,)``; traceable, usable under ``jax.vmap``.
     """
-    from drip_cert._jax import jnp
+    from drip_cert._jax import jnp  # jax: keep off the CLI start-up path
 
     is_matrix = isinstance(exprs, sp.MatrixBase)
     mat = sp.Matrix(exprs)

@@ -22,6 +22,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from scipy.special import erf
 
 from drip_cert.errors import SpecError
 
@@ -119,7 +120,7 @@ class MLP:
         less per path-step (of ~230) on the 4-64-64-4 policy. Training differentiates
         :func:`apply_params` with the plain product (the broadcast form was ~25 % slower there).
         """
-        from drip_cert._jax import jnp
+        from drip_cert._jax import jnp  # jax: keep off the CLI start-up path
 
         params = [(jnp.asarray(w), jnp.asarray(b)) for w, b in self.params()]
         return apply_params(
@@ -140,10 +141,10 @@ def activation_fn(name: str | None, xp):
     if name == "gelu":
         # exact (erf) GELU: x * Phi(x); smooth, with bounded first and second derivatives
         if xp is np:
-            from scipy.special import erf
-        else:
-            from jax.scipy.special import erf
-        return lambda z: 0.5 * z * (1.0 + erf(z / np.sqrt(2.0)))
+            return lambda z: 0.5 * z * (1.0 + erf(z / np.sqrt(2.0)))
+        from jax.scipy.special import erf as jax_erf  # jax: keep off the CLI start-up path
+
+        return lambda z: 0.5 * z * (1.0 + jax_erf(z / np.sqrt(2.0)))
     raise SpecError(f"activation {name!r} is not one of {ACTIVATIONS}")
 
 
@@ -312,6 +313,6 @@ def mlp_from_params(params, activation: str = "tanh", output_activation: str | N
 def jax_params(mlp: MLP) -> list:
     """The parameter pytree ``[(W0, b0), ...]`` of ``mlp`` as jax arrays (inverse of
     :func:`mlp_from_params`), ready for :func:`apply_params` with ``xp=jax.numpy``."""
-    from drip_cert._jax import jnp
+    from drip_cert._jax import jnp  # jax: keep off the CLI start-up path
 
     return [(jnp.asarray(w), jnp.asarray(b)) for w, b in mlp.params()]

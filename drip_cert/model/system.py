@@ -316,8 +316,8 @@ class System:
         :class:`~drip_cert.model.numeric.SimModel`, the view the analysis and the Monte-Carlo
         engine share.
         """
-        from drip_cert._jax import jnp
-        from drip_cert.model.numeric import SimModel
+        from drip_cert._jax import jnp  # jax: keep off the CLI start-up path
+        from drip_cert.model.numeric import SimModel  # jax: keep off the CLI start-up path
 
         n, d = self.n, self.d
         g_fn = self.lower(self.g)

@@ -43,6 +43,7 @@ from flint import arb, ctx
 
 from drip_cert.errors import SpecError
 from drip_cert.numerics.rounding import arb_hi, up
+from drip_cert.provenance import json_float
 
 __all__ = [
     "GapSums",
@@ -499,8 +500,6 @@ class GapStats:
 
     def to_dict(self) -> dict:
         """JSON-ready summary (maximum over time, final-time values, tails at the final time)."""
-        from drip_cert.provenance import json_float
-
         return {
             "name": self.name,
             "n_valid": int(self.n),
@@ -579,7 +578,7 @@ def w2_empirical(a: np.ndarray, b: np.ndarray) -> float:
     float
         ``W2 = (min_coupling sum pi_ij ||a_i - b_j||^2)^{1/2}``.
     """
-    import ot
+    import ot  # ot: keep off the API's import path
 
     a = np.asarray(a, dtype=np.float64)
     b = np.asarray(b, dtype=np.float64)

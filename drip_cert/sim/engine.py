@@ -56,6 +56,7 @@ from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
+from tqdm.auto import tqdm
 
 from drip_cert._jax import jax, jnp
 from drip_cert.errors import SpecError
@@ -155,8 +156,6 @@ def simulate(
         kernel = build_chunk_fn(model, cfg, x0_sampler, x0_bar_sampler).compile(sub)
         compile_s = time.perf_counter() - t0
         show = progress if progress is not None else sys.stderr.isatty()
-        from tqdm.auto import tqdm
-
         bar = tqdm(
             total=cfg.n_paths * cfg.n_steps,
             initial=state.n_done * cfg.n_steps,

@@ -20,6 +20,8 @@ from __future__ import annotations
 
 import math
 
+from jax.extend.random import threefry_2x32
+
 from drip_cert._jax import jax, jnp
 
 __all__ = ["normals", "normals_via_jax", "threefry2x32"]
@@ -80,8 +82,6 @@ def normals_via_jax(keypair, idx, j, d: int):
     The reference that :func:`normals` equals bit for bit (``tests/test_noise.py``) and the slow
     variant timed by ``benchmarks/mc_throughput.py``: on the CPU the primitive is a rolled loop.
     """
-    from jax.extend.random import threefry_2x32
-
     w0, w1 = _counters(idx, j, d)
     out = threefry_2x32(keypair, jnp.concatenate([w0.reshape(-1), w1.reshape(-1)]))
     half = w0.size

@@ -153,7 +153,7 @@ def validate(
         The checks of the main run and of the short-horizon run at the certified parameters
         (when the main run is not at them), the empirical gaps, the notes and the simulation.
     """
-    from drip_cert.control.l1drac import L1Params
+    from drip_cert.control.l1drac import L1Params  # jax: keep off the API's import path
 
     if s.learned is None:
         raise SpecError(

@@ -22,7 +22,7 @@ MIN_SIMULABLE_TS = 1e-9
 
 def x0_sampler(box) -> Any:
     """Uniform initial law on the box ``D`` (jax key -> state)."""
-    from drip_cert._jax import jax, jnp
+    from drip_cert._jax import jax, jnp  # jax: keep off the API's import path
 
     b = np.array(box, dtype=float)
     lo, hi = jnp.asarray(b[:, 0]), jnp.asarray(b[:, 1])
@@ -54,8 +54,8 @@ def run_scenarios(
     progress: bool = False,
 ):
     """Simulate the four scenarios of the DRIP paper for ``s`` (with its learned policy)."""
-    from drip_cert.sim.config import SimConfig
-    from drip_cert.sim.engine import simulate
+    from drip_cert.sim.config import SimConfig  # jax: keep off the API's import path
+    from drip_cert.sim.engine import simulate  # jax: keep off the API's import path
 
     cfg = SimConfig(
         T=T,

@@ -23,6 +23,7 @@ from typing import Any
 
 import numpy as np
 
+from drip_cert.analysis.closed_loop import closed_loop_constants
 from drip_cert.bounds.l1drac.constants import L1Constants
 from drip_cert.bounds.l1drac.designer import TradeoffRow, design, tradeoff_table
 from drip_cert.bounds.l1drac.request import DesignRequest
@@ -85,8 +86,6 @@ def l1_section(
     input_q, unc_q
         Input-operator and uncertainty quantities by name.
     """
-    from drip_cert.analysis.closed_loop import closed_loop_constants
-
     st = settings
     q: dict[str, Quantity] = {}
     if lam.value <= 0:

@@ -11,6 +11,7 @@ from typing import Any
 
 import numpy as np
 
+from drip_cert._jax import jax, jnp
 from drip_cert.analysis.policy_regularity import jacobian_lipschitz
 from drip_cert.bounds.tasil.certificate import TasilCertificate, tasil_certificate
 from drip_cert.bounds.tasil.forms import FORMS, TasilForm
@@ -49,8 +50,6 @@ def trajectory_h(
         One :class:`~drip_cert.bounds.tasil.trajectory.TrajectoryH` per trajectory of ``demos``
         (:func:`~drip_cert.bounds.tasil.trajectory.h_continuous`), and how they were obtained.
     """
-    from drip_cert._jax import jax, jnp
-
     num = s.numeric
 
     def error(z):
