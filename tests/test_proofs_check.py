@@ -112,3 +112,15 @@ def test_paper_text_checks_skip_without_the_source(monkeypatch):
     res = run_checks(quick=True, seed=0, only="text.")
     assert res and all(r.verdict is Verdict.SKIP for r in res)
     assert main(["--quick", "--only", "text."]) == 0
+
+
+def test_coordinate_mapping_check_fails_on_a_wrong_factor():
+    """The mapped-back delta-ISS bound holds with drip-cert's factor and fails with 0.99 of it
+    (a deliberately wrong mapping)."""
+    from proofs_check.coordinates import check_delta_iss_maps_back
+
+    ctx = _ctx("coordinates.delta_iss_maps_back")
+    assert check_delta_iss_maps_back(ctx).verdict is Verdict.PASS
+    ctx = _ctx("coordinates.delta_iss_maps_back")
+    res = check_delta_iss_maps_back(ctx, factor=0.99)
+    assert res.verdict is Verdict.FAIL and res.residual > 0

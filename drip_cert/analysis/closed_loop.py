@@ -75,7 +75,8 @@ def affine_in_blocks(exprs: sp.MatrixBase, s: System) -> AffineBlocks | None:
     if any(a.deriv or a.args != tuple(x) for a in apps):
         return None
     syms = {a: sp.Dummy(type(a).__name__) for a in apps}
-    lin = vec.xreplace(syms)
+    lin = vec.xreplace(syms).applyfunc(sp.expand)  # cancellations (e.g. after a change of
+    # coordinates) must show before the coefficients are read
     variables = x + list(syms.values())
     for e in lin:
         if s.t in e.free_symbols:
@@ -149,6 +150,7 @@ def _f_at_zero_up(dec: AffineBlocks, s: System) -> float:
     hi = add_up_np(c, rad_c)
     for b, C in dec.C.items():
         mlp = s.blocks[b].mlp
+        assert mlp is not None  # the caller checked that every block of dec.C has an MLP
         zero = np.zeros(mlp.in_dim)
         hlo, hhi = enclose_output(mlp, zero, zero)
         # C h for h in [hlo, hhi]: centre-radius with the product rounding (matmul_bounds), plus
@@ -208,6 +210,7 @@ def closed_loop_constants(
         lips = []
         for b, C in dec.C.items():
             mlp = s.blocks[b].mlp
+            assert mlp is not None  # checked above: every block of dec.C has an MLP
             nC = _norm_of_converted(C, spectral=True)
             Lh = lipschitz_bound(mlp)
             lips.append(Lh)
@@ -246,10 +249,10 @@ def closed_loop_constants(
     fn = batch_fn(s, sp.Matrix(F))
     times = np.linspace(0.0, s.horizon, 5)
     growth = growth_ratio_estimate(fn, s.n, 1.0, times)
-    lip = holder_estimate(fn, s.n, 1.0, times)
-    D, L = growth.value, lip.value
+    holder = holder_estimate(fn, s.n, 1.0, times)
+    D, L = growth.value, holder.value
     est = "sampled (spheres of radii up to 1e6): an estimate, not a bound"
-    est_D, est_L = est + growth.diagnostics(), est + lip.diagnostics()
+    est_D, est_L = est + growth.diagnostics(), est + holder.diagnostics()
     if float(np.linalg.norm(growth.argmax)) >= SUPERLINEAR_RADIUS:
         # the ratio is largest at the outermost sampled radius: it grows without bound
         D, L = math.inf, math.inf

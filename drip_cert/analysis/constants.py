@@ -265,10 +265,12 @@ def uncertainty_constants(
 
     hat_src = "L1-DRAC Assumptions 1, 5, 6 (time-Lipschitz constant)"
 
+    diffusion = s.diffusion
+    assert diffusion is not None  # System.__post_init__ makes an absent diffusion the zero matrix
     parts: dict[str, tuple[sp.MatrixBase | None, float, float | None]] = {
         "mu": (s.lambda_mu, 1.0, s.Delta_mu),
         "sigma": (s.lambda_sigma, 0.5, s.Delta_sigma),
-        "p": (s.diffusion if any(e != 0 for e in s.diffusion) else None, 0.5, 0.0),
+        "p": (diffusion if any(e != 0 for e in diffusion) else None, 0.5, 0.0),
     }
     for key, (mat, power, given_bound) in parts.items():
         growth_src = {

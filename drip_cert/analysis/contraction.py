@@ -463,13 +463,6 @@ def contraction_rate(
             "pass J_num or an enclose callback"
         )
 
-    def point_mu(z: np.ndarray) -> float:
-        if J_num is not None:
-            tv = np.array([z[n]]) if depends_t else np.zeros(1)
-            return float(mu_2(J_num(tv, z[None, :n]))[0])
-        lo, hi = menc(np.stack([z, z], axis=1))
-        return float(mu_2(0.5 * (lo + hi)))
-
     if menc is None:
         return _result(
             t0,
@@ -486,6 +479,14 @@ def contraction_rate(
                 + (f"; no sound enclosure: {reason}" if reason else "")
             ),
         )
+
+    def point_mu(z: np.ndarray) -> float:
+        if J_num is not None:
+            tv = np.array([z[n]]) if depends_t else np.zeros(1)
+            return float(mu_2(J_num(tv, z[None, :n]))[0])
+        lo, hi = menc(np.stack([z, z], axis=1))
+        return float(mu_2(0.5 * (lo + hi)))
+
     if not math.isfinite(lb):
         lb = point_mu(arg)
 
@@ -503,10 +504,11 @@ def contraction_rate(
         active=[J.has(v) for v in variables],
         initial=(lb, arg),
     )
-    ub, lb, arg, n_boxes = res.upper, res.lower, res.argmax, res.n_boxes
+    ub, lb, witness, n_boxes = res.upper, res.lower, res.argmax, res.n_boxes
+    assert witness is not None  # maximize was given initial=(lb, arg): it returns a point
     if lb > ub + 1e-9 * (1.0 + abs(ub)):
         raise SolverError(
-            f"a sampled mu_2 = {lb:.17g} at {list(arg)} exceeds the sound bound {ub:.17g}: "
+            f"a sampled mu_2 = {lb:.17g} at {list(witness)} exceeds the sound bound {ub:.17g}: "
             "J_num does not evaluate the same Jacobian as J (or an enclose callback is unsound)"
         )
     gap = ub - lb
@@ -524,7 +526,7 @@ def contraction_rate(
         scope,
         upper=ub,
         sampled=lb,
-        witness=arg,
+        witness=witness,
         tolerance=tol,
         n_boxes=n_boxes,
         note=note,
@@ -539,7 +541,7 @@ def _result(
     *,
     upper: float,
     sampled: float,
-    witness: Sequence[float] | None,
+    witness: Sequence[float] | np.ndarray | None,
     tolerance: float,
     n_boxes: int,
     note: str,

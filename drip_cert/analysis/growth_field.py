@@ -159,7 +159,7 @@ class GrowthField:
                         len(self.entries), len(self.xs)
                     )
                     self._lip = nonneg_spectral_norm_upper(M)
-        return self._lip  # type: ignore[return-value]
+        return self._lip  # computed above when it was still False (not yet computed)
 
     def lipschitz_bounds(self) -> list[tuple[float, str]]:
         """Sound Lipschitz bounds (value, route) from the bounded and the radial route."""

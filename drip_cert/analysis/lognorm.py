@@ -26,7 +26,7 @@ import math
 
 import numpy as np
 import sympy as sp
-from flint import arb, arb_mat, fmpq, fmpq_mat
+from flint import acb, arb, arb_mat, fmpq, fmpq_mat
 
 from drip_cert.errors import SpecError
 from drip_cert.numerics.interval import UnsupportedExpression, enclose_expr
@@ -319,7 +319,8 @@ def _sym_lambda_max_exact(Q: list, n: int) -> tuple[float, float]:
     end of their real parts."""
     half = fmpq(1, 2)
     S = fmpq_mat(n, n, [(Q[i][j] + Q[j][i]) * half for i in range(n) for j in range(n)])
-    roots = S.charpoly().complex_roots()
+    # python-flint 0.9's stub says list[acb]; the runtime returns (root, multiplicity) pairs
+    roots: list[tuple[acb, int]] = S.charpoly().complex_roots()  # type: ignore[assignment]
     lo = max(arb_lo(c.real) for c, _ in roots)
     hi = max(arb_hi(c.real) for c, _ in roots)
     return lo, hi

@@ -116,17 +116,28 @@ def _arb_gelu_prime(z: arb) -> arb:
     return _arb_Phi(z) + z * _arb_phi(z)
 
 
+@dataclass(frozen=True)
+class _Consts:
+    """Rigorous float bounds of the constants the enclosures need: enclosures ``(lo, hi)`` of
+    sqrt 2 and 1/sqrt(2 pi), bounds of GELU' and a bracket of GELU's minimiser."""
+
+    sqrt2: tuple[float, float]
+    inv_sqrt_2pi: tuple[float, float]
+    gelu_prime_max: float  # upper bound of max GELU' = GELU'(sqrt 2)
+    gelu_prime_min: float  # lower bound of min GELU' = GELU'(-sqrt 2)
+    gelu_argmin_bracket: tuple[float, float]  # [a, b] containing the minimiser z* of GELU
+    gelu_min_lo: float  # lower bound of min GELU
+
+
 @functools.cache
-def _consts() -> dict[str, float | tuple[float, float]]:
+def _consts() -> _Consts:
     """Rigorous float bounds of the constants the enclosures need (computed once, in Arb)."""
     sqrt2 = arb(2).sqrt()
-    out: dict[str, float | tuple[float, float]] = {
-        "sqrt2": arb_bounds(sqrt2),
-        "inv_sqrt_2pi": arb_bounds(1 / (2 * arb.pi()).sqrt()),
-        # GELU' = Phi + z phi has its global max at +sqrt 2 and global min at -sqrt 2
-        "gelu_prime_max": arb_hi(_arb_gelu_prime(sqrt2)),
-        "gelu_prime_min": arb_lo(_arb_gelu_prime(-sqrt2)),
-    }
+    sqrt2_bounds = arb_bounds(sqrt2)
+    inv_sqrt_2pi = arb_bounds(1 / (2 * arb.pi()).sqrt())
+    # GELU' = Phi + z phi has its global max at +sqrt 2 and global min at -sqrt 2
+    gelu_prime_max = arb_hi(_arb_gelu_prime(sqrt2))
+    gelu_prime_min = arb_lo(_arb_gelu_prime(-sqrt2))
     # the minimiser z* of GELU (the zero of GELU'): a float estimate, then a bracket [a, b] whose
     # signs are verified in Arb; GELU' < 0 on (-inf, z*) and > 0 on (z*, inf) (see
     # activation_bounds), so z* in [a, b], and for z in [a, b] (all < 0)
@@ -137,9 +148,14 @@ def _consts() -> dict[str, float | tuple[float, float]]:
     a, b = zs - 1e-12, zs + 1e-12
     if not (arb_hi(_arb_gelu_prime(arb(a))) < 0.0 < arb_lo(_arb_gelu_prime(arb(b)))):
         raise ArithmeticError("could not bracket the minimiser of GELU")  # pragma: no cover
-    out["gelu_argmin_bracket"] = (a, b)
-    out["gelu_min_lo"] = arb_lo(arb(a) * _arb_Phi(arb(b)))
-    return out
+    return _Consts(
+        sqrt2=sqrt2_bounds,
+        inv_sqrt_2pi=inv_sqrt_2pi,
+        gelu_prime_max=gelu_prime_max,
+        gelu_prime_min=gelu_prime_min,
+        gelu_argmin_bracket=(a, b),
+        gelu_min_lo=arb_lo(arb(a) * _arb_Phi(arb(b))),
+    )
 
 
 # --------------------------------------------------------------------------- activations
@@ -212,7 +228,7 @@ def _activation_bounds(name: str | None) -> ActivationBounds:
         return ActivationBounds("tanh", 0.0, 1.0, 1.0, curv)
     if name == "gelu":
         c = _consts()
-        hi, lo = float(c["gelu_prime_max"]), float(c["gelu_prime_min"])
+        hi, lo = float(c.gelu_prime_max), float(c.gelu_prime_min)
         curv = arb_hi((2 / arb.pi()).sqrt())
         return ActivationBounds("gelu", lo, hi, max(hi, abs(lo)), curv)
     raise SpecError(
@@ -614,7 +630,7 @@ def _Phi_bounds(z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 def _phi_bounds(z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Enclosure of the normal density ``exp(-z^2/2) / sqrt(2 pi)``: ``z^2/2`` rounded both
     ways, ``exp`` decreasing in it, ``1/sqrt(2 pi)`` from Arb."""
-    c_lo, c_hi = _consts()["inv_sqrt_2pi"]
+    c_lo, c_hi = _consts().inv_sqrt_2pi
     zz = z * z
     h_lo = down_np(0.5 * down_np(zz))
     h_hi = up_np(0.5 * up_np(zz))
@@ -679,12 +695,12 @@ def enclose_activation(name: str | None, lo, hi) -> tuple[np.ndarray, np.ndarray
         return np.clip(ylo, -1.0, 1.0), np.clip(yhi, -1.0, 1.0)
     if name == "gelu":
         c = _consts()
-        a, b = c["gelu_argmin_bracket"]
+        a, b = c.gelu_argmin_bracket
         l_lo, l_hi = _gelu_point(lo)
         h_lo, h_hi = _gelu_point(hi)
         left = hi <= a  # [lo, hi] inside (-inf, z*]: decreasing
         right = lo >= b  # inside [z*, inf): increasing
-        ylo = np.where(left, h_lo, np.where(right, l_lo, c["gelu_min_lo"]))
+        ylo = np.where(left, h_lo, np.where(right, l_lo, c.gelu_min_lo))
         yhi = np.where(left, l_hi, np.where(right, h_hi, np.maximum(l_hi, h_hi)))
         return ylo, yhi
     raise SpecError(f"activation {name!r} is not supported", field="activation")
@@ -709,14 +725,14 @@ def enclose_activation_prime(name: str | None, lo, hi) -> tuple[np.ndarray, np.n
         return _sech2_bounds(a_max)[0], _sech2_bounds(a_min)[1]
     if name == "gelu":
         c = _consts()
-        s_lo, s_hi = c["sqrt2"]
+        s_lo, s_hi = c.sqrt2
         l_lo, l_hi = _gelu_prime_point(lo)
         h_lo, h_hi = _gelu_prime_point(hi)
         # may contain -sqrt2 / +sqrt2 (conservative: the global extreme is always a valid bound)
         has_min = (lo <= -s_lo) & (hi >= -s_hi)
         has_max = (lo <= s_hi) & (hi >= s_lo)
-        dlo = np.where(has_min, c["gelu_prime_min"], np.minimum(l_lo, h_lo))
-        dhi = np.where(has_max, c["gelu_prime_max"], np.maximum(l_hi, h_hi))
+        dlo = np.where(has_min, c.gelu_prime_min, np.minimum(l_lo, h_lo))
+        dhi = np.where(has_max, c.gelu_prime_max, np.maximum(l_hi, h_hi))
         return dlo, dhi
     raise SpecError(f"activation {name!r} is not supported", field="activation")
 

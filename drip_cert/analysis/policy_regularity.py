@@ -62,7 +62,9 @@ def jacobian_lipschitz(s: System, which: str, box: np.ndarray | None = None) -> 
         total, notes, parts = 0.0, [], []
         for bname, C in sorted(dec.C.items()):
             c2 = float(spectral_norm_upper(np.atleast_2d(C)))
-            Lq = jacobian_lipschitz_bound(s.blocks[bname].mlp)
+            mlp = s.blocks[bname].mlp
+            assert mlp is not None  # checked above: every block of dec.C has an MLP
+            Lq = jacobian_lipschitz_bound(mlp)
             parts.append(Lq)
             total = add_up(total, mul_up(c2, Lq.value))
             notes.append(f"||C_{bname}||_2 <= {c2:.4g} times L_d{bname} = {Lq.value:.4g}")

@@ -11,12 +11,14 @@ read: ``assumptions``, ``contraction.rate``, ``contraction.metric_rate``, ``cont
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
+import sympy as sp
 
 from drip_cert.analysis.block_enclosure import block_enclose_callback
 from drip_cert.analysis.constants import (
@@ -26,11 +28,12 @@ from drip_cert.analysis.constants import (
     uncertainty_constants,
 )
 from drip_cert.analysis.contraction import ContractionResult, contraction_rate
+from drip_cert.analysis.coordinates import CoordinateChange, coordinates_from_metric
 from drip_cert.analysis.invariance import InvariantSet, best_invariant_set
 from drip_cert.analysis.iss import delta_iss
 from drip_cert.bounds.l1drac.system import l1_section
 from drip_cert.errors import AssumptionViolation, DripCertError
-from drip_cert.model.system import System
+from drip_cert.model.system import System, box_image
 from drip_cert.numerics.rounding import div_up, mul_up, up
 from drip_cert.progress import Stages
 from drip_cert.provenance import Check, How, Quantity, Scope, Verdict, json_float, verdict_of
@@ -143,6 +146,8 @@ class Certificate:
     notes: tuple[str, ...] = ()
     invariance: InvariantSet | None = None
     extra_quantities: tuple[Quantity, ...] = ()  #: other inputs of the checks (h0, h1, gamma0)
+    coordinates: CoordinateChange | None = None  #: None: computed in the user's x
+    alternatives: tuple[Mapping[str, Any], ...] = ()  #: the other coordinates tried, in summary
 
     @property
     def verdict(self) -> Verdict:
@@ -199,16 +204,33 @@ class Certificate:
         return qs
 
     @property
-    def rho_l1(self) -> float | None:
+    def rho_l1_native(self) -> float | None:
+        """``rho_L1`` in the coordinates the certificate was computed in (``system.states``)."""
         if self.l1 is None or not self.l1.feasible:
             return None
         return float(self.l1.design.rho)
 
     @property
-    def rho_tasil(self) -> float | None:
+    def rho_tasil_native(self) -> float | None:
+        """``rho_TaSIL`` in the coordinates the certificate was computed in."""
         if self.tasil is None or self.tasil.rho is None:
             return None
         return float(self.tasil.rho)
+
+    def _in_x(self, v: float | None) -> float | None:
+        if v is None or self.coordinates is None:
+            return v
+        return self.coordinates.gap_in_x(v)
+
+    @property
+    def rho_l1(self) -> float | None:
+        """``rho_L1`` in the user's coordinates ``x`` (mapped back by ``||Theta^{-1}||_2``)."""
+        return self._in_x(self.rho_l1_native)
+
+    @property
+    def rho_tasil(self) -> float | None:
+        """``rho_TaSIL`` in the user's coordinates ``x``."""
+        return self._in_x(self.rho_tasil_native)
 
     @property
     def rho(self) -> float | None:
@@ -251,6 +273,7 @@ class Certificate:
             "rho_tasil": json_float(self.rho_tasil) if self.rho_tasil is not None else None,
             "rho_l1": json_float(self.rho_l1) if self.rho_l1 is not None else None,
             "rho_total": json_float(self.rho) if self.rho is not None else None,
+            "coordinates": "x (the spec's states)",
             "source": "DRIP eq. (TotalTIG): rho = rho_TaSIL + rho_L1",
             "note": "rho_TaSIL is a (1 - delta) radius of max_t ||x'_t - x*_t||, rho_L1 an L_2p "
             "moment bound of ||X_t - x'_t||: their sum is reported as the paper states it, and "
@@ -279,12 +302,42 @@ class Certificate:
             if self.tasil is None
             else {**self.tasil.to_dict(), "provenance": dict(self.tasil_provenance)},
             "rho": rho,
+            "coordinates": self._coordinates_dict(),
             "notes": list(self.notes),
         }
 
+    def _coordinates_dict(self) -> dict[str, Any]:
+        """Which coordinates the numbers live in, and the conversion (schema 3)."""
+        if self.coordinates is None:
+            out: dict[str, Any] = {
+                "system": "x",
+                "note": "every number is in the spec's coordinates x",
+            }
+        else:
+            out = {
+                "system": "z = Theta x",
+                **self.coordinates.to_dict(),
+                "rho_tasil_z": json_float(self.rho_tasil_native)
+                if self.rho_tasil_native is not None
+                else None,
+                "rho_l1_z": json_float(self.rho_l1_native)
+                if self.rho_l1_native is not None
+                else None,
+                "note": "the certificate is computed for the equivalent system in z = Theta x "
+                "(docs/math/contraction.md section 5): rates, gains, constants, the TaSIL and "
+                "L1-DRAC sections and the system shown are in z; rho.* are mapped back to x by "
+                "factor_to_x >= ||Theta^{-1}||_2 (Proposition 5.3); input-space quantities "
+                "(h0, policy errors, the L1-DRAC input) are the same in both",
+            }
+        out["alternatives"] = [dict(a) for a in self.alternatives]
+        return out
 
-SCHEMA_VERSION = 2
-"""Version of :meth:`Certificate.to_dict`'s layout (2: ``verdict``, ``parts``, scopes)."""
+
+EST_RATE_FLOOR = 2.0**-52  #: smallest sampled rate a conditional L1-DRAC design is built on
+
+SCHEMA_VERSION = 3
+"""Version of :meth:`Certificate.to_dict`'s layout (2: ``verdict``, ``parts``, scopes; 3:
+``coordinates``: the certificate may be computed in metric coordinates z, ``rho`` is in x)."""
 
 
 def _rate_check(cid: str, r: Any, what: str, source: str) -> Check:
@@ -352,6 +405,17 @@ def certify(
         An MLP to use as the learned policy ``pi_IL`` (replaces the spec's).
     progress
         Report each stage and its duration on stderr.
+
+    Notes
+    -----
+    Coordinates (``[contraction] metric``, docs/math/contraction.md section 5): with ``"auto"``
+    (the default) the certificate is computed in the spec's coordinates ``x`` and, when an LMI
+    contraction metric ``P`` of the expert closed loop is found and the Euclidean rate fails or
+    is slower than the metric rate, also for the equivalent system in ``z = Theta x``
+    (``P = Theta^T Theta``); the better one is returned (verdict first, then the smaller ``rho``
+    in ``x``; a tie keeps ``x``), the other summarised under ``coordinates.alternatives``.
+    ``"lmi"`` always uses the metric when one is found, a given matrix ``P`` uses that metric,
+    ``"euclidean"`` never changes coordinates.
     """
     if isinstance(spec, System):
         spec = Spec(None, spec)
@@ -360,6 +424,107 @@ def certify(
 
         spec = spec.with_system(learned_system(spec.system, policy))
     stage = Stages("certify", enabled=progress)
+    opts = spec.settings.contraction
+    if opts.coordinates == "given":
+        assert opts.P is not None  # set with "given" by ContractionSettings.from_table
+        change = coordinates_from_metric(np.array(opts.P), "given in [contraction] metric")
+        cert = _certify_in_metric(spec, change, demonstrations, stage)
+        stage.done()
+        return cert
+    cert_x = _certify_in(spec, demonstrations, stage)
+    metric = cert_x.contraction_expert.metric
+    eu = cert_x.contraction_expert.euclidean
+    if opts.coordinates == "euclidean" or metric is None:
+        stage.done()
+        return cert_x
+    if opts.coordinates == "auto" and eu.holds and eu.rate >= metric.metric_rate:
+        stage.done()
+        return cert_x
+    change = coordinates_from_metric(
+        metric.P,
+        f"the LMI contraction metric of the expert closed loop (rate {metric.metric_rate:.6g})",
+    )
+    stage(f"the same certificate in z = Theta x (metric rate {metric.metric_rate:.6g})")
+    cert_z = _certify_in_metric(spec, change, demonstrations, stage)
+    stage.done()
+    if opts.coordinates == "lmi":
+        chosen, other = cert_z, cert_x
+    else:
+        # z only when strictly better: a tie keeps the user's own coordinates
+        chosen = min((cert_x, cert_z), key=_preference)
+        other = cert_x if chosen is cert_z else cert_z
+    return dataclasses.replace(chosen, alternatives=(_summary(other),))
+
+
+_VERDICT_ORDER = {Verdict.CERTIFIED: 0, Verdict.CONDITIONAL: 1, Verdict.NOT_CERTIFIED: 2}
+
+
+def _preference(c: Certificate) -> tuple[int, float]:
+    """Better verdict first, then the smaller total radius in x (missing radii count as inf)."""
+    rho = c.rho if c.rho is not None else (c.rho_tasil if c.rho_tasil is not None else math.inf)
+    return _VERDICT_ORDER[c.verdict], rho
+
+
+def _summary(c: Certificate) -> dict[str, Any]:
+    return {
+        "coordinates": "x" if c.coordinates is None else "z = Theta x",
+        "verdict": c.verdict.value,
+        "expert_rate": json_float(c.contraction_expert.euclidean.rate),
+        "rho_tasil_x": json_float(c.rho_tasil) if c.rho_tasil is not None else None,
+        "rho_l1_x": json_float(c.rho_l1) if c.rho_l1 is not None else None,
+        "factor_to_x": None if c.coordinates is None else c.coordinates.to_x,
+    }
+
+
+def _certify_in_metric(
+    spec: Spec, change: CoordinateChange, demonstrations: DemonstrationSet | None, stage: Stages
+) -> Certificate:
+    """The certificate of the equivalent system in ``z = Theta x``, labelled with ``change``."""
+    Th = sp.Matrix(change.theta.tolist()).applyfunc(sp.Rational)
+    zsys = spec.system.transformed(change.theta)
+    tables = {k: dict(v) for k, v in spec.tables.items()}
+    ctab = tables.setdefault("contraction", {})
+    ctab["metric"] = "euclidean"
+    if "region" in ctab:
+        ctab["region"] = [list(b) for b in box_image(Th, ctab["region"])]
+    zspec = Spec(spec.path, zsys, tables)
+    demos = demonstrations
+    wants = spec.system.learned is not None and (
+        "tasil" in spec.settings.present or demonstrations is not None
+    )
+    if demos is None and wants:
+        from drip_cert.learn.imitation import demonstration_set  # jax: keep off the API's path
+
+        demos = demonstration_set(spec.system, spec.settings.tasil)
+    zdemos = None if demos is None else _demonstrations_in_z(demos, change)
+    cert = _certify_in(zspec, zdemos, stage)
+    return dataclasses.replace(cert, coordinates=change)
+
+
+def _demonstrations_in_z(demos: DemonstrationSet, change: CoordinateChange) -> DemonstrationSet:
+    """The demonstrations as states of the z-system (inputs unchanged)."""
+    from drip_cert.learn.data import Demonstrations  # jax: keep off the API's import path
+
+    def one(d: Demonstrations | None) -> Demonstrations | None:
+        if d is None:
+            return None
+        states = d.states @ change.theta.T
+        return Demonstrations(
+            times=d.times,
+            states=states,
+            actions=d.actions,
+            x0=states[:, 0].copy(),
+            source=f"{d.source} (mapped to z = Theta x)",
+            integration_error=mul_up(change.to_z, d.integration_error),
+        )
+
+    train = one(demos.train)
+    assert train is not None
+    return dataclasses.replace(demos, train=train, heldout=one(demos.heldout))
+
+
+def _certify_in(spec: Spec, demonstrations: DemonstrationSet | None, stage: Stages) -> Certificate:
+    """The certificate of ``spec`` in its own coordinates (see :func:`certify`)."""
     s = spec.system
     settings = spec.settings
     opts = settings.contraction  # validated at load (its region contains the support)
@@ -514,7 +679,9 @@ def certify(
         stage("L1-DRAC constants, design and its verification in Arb")
         lam_q = src.euclidean.to_quantity()
         est = -src.euclidean.max_mu_sampled
-        if lam_q.value <= 0 < est:
+        # a sampled rate below float resolution (e.g. 5e-324 for a loop with mu_2 = 0 exactly) is
+        # no evidence of contraction: no design on it (it also underflows the designer's logs)
+        if lam_q.value <= 0 and est > EST_RATE_FLOOR:
             # the rigorous route did not establish contraction but sampling suggests it: design
             # with the estimate, labelled so; the L1DRAC-A2 check above stays failed
             lam_q = Quantity.derive(
@@ -541,6 +708,7 @@ def certify(
             uc.values,
         )
         design_inputs = list(l1.constants.values())
+        design_values = l1.design.to_dict() if l1.design is not None else {}
         dcheck = Check.derive(
             "L1DRAC-design",
             l1.feasible,
@@ -553,7 +721,7 @@ def certify(
                 + (
                     "feasible design: "
                     + ", ".join(
-                        f"{k} = {l1.design.to_dict()[k]:.6g}"
+                        f"{k} = {design_values[k]:.6g}"
                         for k in ("omega", "lambda_s", "Ts", "rho_r", "rho_a", "rho")
                     )
                     if l1.feasible
@@ -565,7 +733,6 @@ def certify(
             source="L1-DRAC (16), (21), (24)",
         )
         checks.append(dcheck.with_scope(*_sde_scope(dcheck.scope, s.horizon)))
-    stage.done()
     return Certificate(
         system=s,
         assumptions=tuple(checks),

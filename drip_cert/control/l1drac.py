@@ -30,7 +30,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import NamedTuple
+from typing import Generic, NamedTuple, TypeVar
 
 from drip_cert._jax import jnp
 from drip_cert.errors import SpecError
@@ -38,6 +38,8 @@ from drip_cert.errors import SpecError
 __all__ = ["L1Params", "L1State", "l1_init", "l1_step"]
 
 _RATIO_RTOL = 1e-9
+
+_Leaf = TypeVar("_Leaf")
 """Relative tolerance on ``T_s / dt`` being an integer: floating-point inputs such as
 ``T_s = 0.01, dt = 0.001`` give ratios within a few ulps of an integer; anything farther is a
 genuine mismatch between the sampling period and the grid."""
@@ -117,8 +119,11 @@ class L1Params:
         return math.exp(-self.lambda_s * self.Ts)
 
 
-class L1State(NamedTuple):
+class L1State(NamedTuple, Generic[_Leaf]):
     """Controller state of one path at ``t_j`` (a jax pytree; add a leading axis to batch).
+
+    The leaves are arrays, ``L1State[jnp.ndarray]``; the same structure with an axis (int) or
+    ``None`` per leaf, ``L1State[int | None]``, is a ``jax.vmap`` ``in_axes``/``out_axes`` spec.
 
     Attributes
     ----------
@@ -134,14 +139,14 @@ class L1State(NamedTuple):
         The step counter ``j``.
     """
 
-    x_hat: jnp.ndarray
-    eta: jnp.ndarray
-    lam_hat: jnp.ndarray
-    theta: jnp.ndarray
-    step: jnp.ndarray
+    x_hat: _Leaf
+    eta: _Leaf
+    lam_hat: _Leaf
+    theta: _Leaf
+    step: _Leaf
 
 
-def l1_init(x0, theta0) -> L1State:
+def l1_init(x0, theta0) -> L1State[jnp.ndarray]:
     """Initial state: ``x_hat(0) = x_0``, ``eta(0) = 0``, ``Lambda_hat = 0`` on ``[0, T_s)``.
 
     Parameters
@@ -163,7 +168,7 @@ def l1_init(x0, theta0) -> L1State:
     )
 
 
-def l1_step(params: L1Params, state: L1State, x, f_known, g_t, theta_t):
+def l1_step(params: L1Params, state: L1State[jnp.ndarray], x, f_known, g_t, theta_t):
     """One step of L1-DRAC (15a)-(15c) from ``t_j`` to ``t_{j+1} = t_j + dt``.
 
     Pure and shape-polymorphic over one path; use ``jax.vmap`` (with ``g_t``, ``theta_t``

@@ -111,23 +111,27 @@ class Targets:
     used by the loss.
     """
 
-    states: object
-    actions: object
-    jac: object = None
-    hess: object = None
+    states: jax.Array
+    actions: jax.Array
+    jac: jax.Array | None = None
+    hess: jax.Array | None = None
+
+    def map_arrays(self, f: Callable[[jax.Array], jax.Array]) -> Targets:
+        """``f`` applied to every array (an absent ``jac``/``hess`` stays ``None``)."""
+        return Targets(
+            f(self.states),
+            f(self.actions),
+            None if self.jac is None else f(self.jac),
+            None if self.hess is None else f(self.hess),
+        )
 
     def take(self, index) -> Targets:
         """The targets of the trajectories ``index``."""
-        return Targets(*(None if a is None else a[index] for a in self._arrays()))
+        return self.map_arrays(lambda a: a[index])
 
     def flat(self) -> Targets:
         """The same targets with trajectories and times merged: shapes ``(1, N*K, ...)``."""
-        return Targets(
-            *(None if a is None else a.reshape(1, -1, *a.shape[2:]) for a in self._arrays())
-        )
-
-    def _arrays(self):
-        return (self.states, self.actions, self.jac, self.hess)
+        return self.map_arrays(lambda a: a.reshape(1, -1, *a.shape[2:]))
 
 
 def expert_targets(

@@ -364,8 +364,8 @@ def _eval_loss(params, targets: Targets, *, net: _Net, spec):
 
 @partial(jax.jit, static_argnames=("net", "spec", "schedule", "n_steps", "batch_size", "axis"))
 def _run_chunk(
-    params, opt_state, key, step0, pool: Targets, lr_args, *, net, spec, schedule, n_steps,
-    batch_size, axis,
+    params, opt_state, key, step0, pool: Targets, lr_args: tuple[jax.Array, jax.Array], *, net,
+    spec, schedule, n_steps, batch_size, axis,
 ):  # fmt: skip
     """``n_steps`` Adam steps on seeded mini-batches drawn without replacement from ``pool``
     along ``axis`` (states for the mean reduction, trajectories for the max reduction)."""
@@ -407,8 +407,7 @@ def _split(n_traj: int, val_fraction: float, rng: np.random.Generator):
 
 
 def _take_axis(targets: Targets, idx, axis: int) -> Targets:
-    arrays = (targets.states, targets.actions, targets.jac, targets.hess)
-    return Targets(*(None if a is None else jnp.take(a, idx, axis=axis) for a in arrays))
+    return targets.map_arrays(lambda a: jnp.take(a, idx, axis=axis))
 
 
 def evaluate_gap(

@@ -14,7 +14,7 @@ from __future__ import annotations
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar, TypeAlias
 
 import numpy as np
 import sympy as sp
@@ -34,7 +34,7 @@ class BlockFunction(sp.Function):
     block_name: str = ""
     out_index: int = 0
     deriv: tuple[int, ...] = ()
-    _family: dict | None = None
+    _family: ClassVar[Family | None] = None
 
     def fdiff(self, argindex: int = 1) -> sp.Expr:  # noqa: D401 (sympy API)
         """Partial derivative with respect to argument ``argindex`` (1-based)."""
@@ -49,9 +49,13 @@ class BlockFunction(sp.Function):
         return fam[key](*self.args)
 
 
-def _make_family(name: str, in_dim: int, out_dim: int) -> dict[tuple[int, tuple[int, ...]], type]:
+#: The sympy function classes of one block, by ``(out_index, deriv)``.
+Family: TypeAlias = dict[tuple[int, tuple[int, ...]], type[BlockFunction]]
+
+
+def _make_family(name: str, in_dim: int, out_dim: int) -> Family:
     """Create the sympy function classes of one block (values, Jacobian, Hessian entries)."""
-    fam: dict[tuple[int, tuple[int, ...]], type] = {}
+    fam: Family = {}
     for j in range(out_dim):
         keys: list[tuple[int, ...]] = [()]
         keys += [(i,) for i in range(in_dim)]
@@ -68,6 +72,7 @@ def _make_family(name: str, in_dim: int, out_dim: int) -> dict[tuple[int, tuple[
                 (BlockFunction,),
                 {"block_name": name, "out_index": j, "deriv": d, "nargs": in_dim},
             )
+            assert issubclass(cls, BlockFunction)  # created with that base
             fam[(j, d)] = cls
     for cls in fam.values():
         cls._family = fam
@@ -98,7 +103,9 @@ class Block:
     fn: Callable[[Any], Any]
     mlp: MLP | None = None
     source: str = ""
-    family: Mapping[tuple[int, tuple[int, ...]], type] = field(init=False, repr=False)
+    family: Mapping[tuple[int, tuple[int, ...]], type[BlockFunction]] = field(
+        init=False, repr=False
+    )
 
     def __post_init__(self) -> None:
         if not self.name.isidentifier() or self.name.startswith("_") or "__" in self.name:
@@ -109,7 +116,7 @@ class Block:
             raise SpecError(f"block '{self.name}': inputs and outputs must be >= 1")
         object.__setattr__(self, "family", _make_family(self.name, self.in_dim, self.out_dim))
 
-    def component(self, j: int) -> type:
+    def component(self, j: int) -> type[BlockFunction]:
         """The sympy function class of output component ``j``."""
         return self.family[(j, ())]
 
@@ -129,10 +136,10 @@ class Block:
         """Evaluate on a batch ``(N, in_dim)`` (or one point) and return numpy."""
         from drip_cert._jax import jax, jnp  # jax: keep off the CLI start-up path
 
-        z = jnp.asarray(z, dtype=jnp.float64)
-        if z.ndim == 1:
-            return np.asarray(self.fn(z))
-        return np.asarray(jax.vmap(self.fn)(z))
+        zj = jnp.asarray(z, dtype=jnp.float64)
+        if zj.ndim == 1:
+            return np.asarray(self.fn(zj))
+        return np.asarray(jax.vmap(self.fn)(zj))
 
     def to_dict(self) -> dict[str, Any]:
         out: dict[str, Any] = {"name": self.name, "inputs": self.in_dim, "outputs": self.out_dim}

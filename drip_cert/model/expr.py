@@ -19,7 +19,7 @@ that names the field, the offending text and what is allowed.
 from __future__ import annotations
 
 import ast
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 
 import sympy as sp
 
@@ -27,7 +27,7 @@ from drip_cert.errors import SpecError
 from drip_cert.model.blocks import Block
 
 #: Elementary functions accepted in expressions, with their sympy counterparts.
-FUNCTIONS: Mapping[str, object] = {
+FUNCTIONS: Mapping[str, Callable[..., sp.Expr]] = {
     "sin": sp.sin,
     "cos": sp.cos,
     "tan": sp.tan,

@@ -11,10 +11,14 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import sympy as sp
 
 from drip_cert.model.blocks import Block, BlockFunction, block_applications
+
+if TYPE_CHECKING:
+    import jax
 
 
 @dataclass(frozen=True)
@@ -72,7 +76,7 @@ def lower(
         level_prev = list(placeholders)
         for (bname, args), members in groups.items():
             arg_fn = sp.lambdify([t, *states, *level_prev], list(args), modules="jax")
-            outs = []
+            outs: list[tuple[tuple[int, ...], int, int]] = []  # as _BlockCall.outputs
             for a in members:
                 sym = sp.Dummy(f"{bname}_{a.out_index}")
                 outs.append((a.deriv, a.out_index, len(placeholders) + len(outs)))
@@ -91,12 +95,12 @@ def lower(
             cache[block.name] = block.jacobian_fn() if order == 1 else block.hessian_fn()
         return cache[block.name]
 
-    def fn(tt, x):
+    def fn(tt: jax.Array, x: jax.Array) -> jax.Array:
         xs = [x[i] for i in range(len(states))]
-        vals: list = [None] * len(placeholders)
+        vals: list[jax.Array | None] = [None] * len(placeholders)
         for call in calls:
             z = jnp.stack(jnp.broadcast_arrays(*call.arg_fn(tt, *xs, *vals[: call.n_prev])))
-            results: dict[int, object] = {}
+            results: dict[int, jax.Array] = {}
             for deriv, j, pos in call.outputs:
                 order = len(deriv)
                 if order not in results:

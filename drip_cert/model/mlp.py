@@ -20,6 +20,7 @@ import json
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from scipy.special import erf
@@ -199,7 +200,9 @@ def init_mlp(
 def save_mlp(mlp: MLP, path: str | Path) -> None:
     """Save ``mlp`` as ``path`` (.npz) plus ``.json`` metadata; each written atomically."""
     path = Path(path)
-    arrays = {}
+    # keys W{i}/b{i} never clash with np.savez's own keywords (file, allow_pickle); the values are
+    # typed Any because mypy matches **arrays also against ``allow_pickle: bool``
+    arrays: dict[str, Any] = {}
     for i, (w, b) in enumerate(zip(mlp.weights, mlp.biases)):
         arrays[f"W{i}"] = w
         arrays[f"b{i}"] = b

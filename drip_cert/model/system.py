@@ -26,6 +26,7 @@ import sympy as sp
 from drip_cert.errors import SpecError
 from drip_cert.model.blocks import Block, block_applications
 from drip_cert.model.lower import lower
+from drip_cert.numerics.rounding import mul_up, sqrt_up, sum_sq_up
 
 if TYPE_CHECKING:
     from drip_cert.model.numeric import SimModel
@@ -234,6 +235,7 @@ class System:
 
     @property
     def d(self) -> int:
+        assert self.brownian_dim is not None  # set to an int by __post_init__
         return int(self.brownian_dim)
 
     @property
@@ -351,6 +353,80 @@ class System:
             ),
         )
 
+    def transformed(self, Theta: Any, *, suffix: str = "z") -> System:
+        """The equivalent system in the coordinates ``z = Theta x`` (docs/math/contraction.md
+        Proposition 5.1).
+
+        ``Theta`` is any invertible constant ``n x n`` matrix; its entries are taken as the exact
+        rationals they denote (a float is the binary rational it stores), and ``Theta^{-1}`` is
+        computed exactly, so the new system is exactly equivalent to this one, not an
+        approximation. ``f_z(t, z) = Theta f(t, Theta^{-1} z)``, ``g_z = Theta g``, policies
+        ``pi(Theta^{-1} z)``, uncertainties and the known diffusion ``Theta (.)(t, Theta^{-1} z)``;
+        blocks are composed with ``Theta^{-1}`` (their arguments become linear combinations of
+        ``z``), not re-fitted. The support box maps to a parallelotope: the new support is the
+        smallest box enclosing it, rounded outward (a larger set: every bound over the support
+        stays sound, and the initial law in ``z`` is the push-forward of the old one, NOT uniform
+        on that box). Given growth bounds ``Delta_mu``, ``Delta_sigma`` become
+        ``||Theta||_2 max(1, ||Theta^{-1}||_2) Delta`` (rounded up; the Frobenius norm bounds
+        ``||.||_2`` here, which keeps them sound) since
+        ``||x||^2 <= ||Theta^{-1}||^2 ||z||^2``.
+        """
+        n = self.n
+        Th = sp.Matrix(Theta) if not isinstance(Theta, np.ndarray) else sp.Matrix(Theta.tolist())
+        if Th.shape != (n, n):
+            raise SpecError(f"Theta must be {n} x {n}, got {Th.shape[0]} x {Th.shape[1]}")
+        try:
+            Th = Th.applyfunc(_exact_rational)
+        except (TypeError, ValueError) as exc:
+            raise SpecError(f"Theta must have finite numeric entries: {exc}") from None
+        if Th.det() == 0:
+            raise SpecError("Theta is singular: a change of coordinates must be invertible")
+        Ti = Th.inv()
+        zs = tuple(sp.Symbol(f"{suffix}{i + 1}", real=True) for i in range(n))
+        back = dict(zip(self.states, list(Ti * sp.Matrix(zs)), strict=True))
+
+        def sub(mat: sp.MatrixBase | None) -> sp.ImmutableMatrix | None:
+            if mat is None:
+                return None
+            # expanded: cancellations that were visible in x (a closed loop linear after the
+            # policy cancels a nonlinearity) stay visible in z
+            return sp.ImmutableMatrix(sp.Matrix(mat).xreplace(back).applyfunc(sp.expand))
+
+        def lift(mat: sp.MatrixBase | None) -> sp.ImmutableMatrix | None:
+            inner = sub(mat)
+            if inner is None:
+                return None
+            return sp.ImmutableMatrix((Th * sp.Matrix(inner)).applyfunc(sp.expand))
+
+        given = {}
+        if self.Delta_mu is not None or self.Delta_sigma is not None:
+            fro = sqrt_up(sum_sq_up(_float_up_abs(e) for e in Th))
+            fro_inv = sqrt_up(sum_sq_up(_float_up_abs(e) for e in Ti))
+            k = mul_up(fro, max(1.0, fro_inv))
+            for key in ("Delta_mu", "Delta_sigma"):
+                v = getattr(self, key)
+                given[key] = None if v is None else mul_up(k, v)
+        return System(
+            name=f"{self.name} in z = Theta x",
+            states=zs,
+            f=lift(self.f),
+            g=sp.ImmutableMatrix(Th * sp.Matrix(self.g)),
+            expert=sub(self.expert),
+            support=box_image(Th, self.support),
+            horizon=self.horizon,
+            t=self.t,
+            inputs=self.inputs,
+            learned=sub(self.learned),
+            diffusion=lift(self.diffusion),
+            lambda_mu=lift(self.lambda_mu),
+            lambda_sigma=lift(self.lambda_sigma),
+            Delta_mu=given.get("Delta_mu", self.Delta_mu),
+            Delta_sigma=given.get("Delta_sigma", self.Delta_sigma),
+            brownian_dim=self.d,
+            true_support=None if self.true_support is None else box_image(Th, self.true_support),
+            blocks=self.blocks,
+        )
+
     def with_learned(
         self, learned: Sequence[sp.Expr] | sp.MatrixBase, blocks: Mapping[str, Block] | None = None
     ) -> System:
@@ -431,4 +507,50 @@ def _box(value: Any, n: int, fieldname: str) -> tuple[tuple[float, float], ...]:
         if float(lo) > float(hi):
             raise SpecError(f"interval {i} is empty: lo = {lo} > hi = {hi}", field=fieldname)
         out.append((float(lo), float(hi)))
+    return tuple(out)
+
+
+def _exact_rational(v: Any) -> sp.Rational:
+    """The exact rational a number denotes (a float: the binary rational it stores)."""
+    if isinstance(v, sp.Rational):
+        return v
+    if isinstance(v, sp.Float | float | int | np.floating | np.integer):
+        x = float(v) if not isinstance(v, int | np.integer) else int(v)
+        if isinstance(x, float) and not math.isfinite(x):
+            raise ValueError(f"{v!r} is not finite")
+        return sp.Rational(x)
+    e = sp.sympify(v)
+    if e.is_Rational:
+        return e
+    raise TypeError(f"{v!r} is not a rational number (give Theta numerically)")
+
+
+def _float_up_abs(r: sp.Rational) -> float:
+    """A float ``>= |r|`` (exact rational comparison)."""
+    a = abs(sp.Rational(r))
+    x = float(a)
+    return x if sp.Rational(x) >= a else math.nextafter(x, math.inf)
+
+
+def _float_down(r: sp.Rational) -> float:
+    x = float(r)
+    return x if sp.Rational(x) <= r else math.nextafter(x, -math.inf)
+
+
+def _float_up(r: sp.Rational) -> float:
+    x = float(r)
+    return x if sp.Rational(x) >= r else math.nextafter(x, math.inf)
+
+
+def box_image(Th: sp.Matrix, box: Sequence[Sequence[float]]) -> tuple[tuple[float, float], ...]:
+    """The smallest box containing ``Th @ box`` (exact interval arithmetic, rounded outward)."""
+    out = []
+    for i in range(Th.shape[0]):
+        lo = hi = sp.Rational(0)
+        for j, (a, b) in enumerate(box):
+            c = Th[i, j]
+            ends = (c * sp.Rational(a), c * sp.Rational(b))
+            lo += min(ends)
+            hi += max(ends)
+        out.append((_float_down(lo), _float_up(hi)))
     return tuple(out)

@@ -44,7 +44,7 @@ def jsonable(obj: Any) -> Any:
     return obj
 
 
-def _atomic(path: str | Path, mode: str, write: Callable[[IO[Any]], None]) -> None:
+def _atomic(path: str | Path, mode: str, write: Callable[[IO[Any]], object]) -> None:
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.name + ".", suffix=".tmp")
@@ -73,6 +73,16 @@ def atomic_write_json(path: str | Path, obj: Any) -> None:
     atomic_write_text(path, json.dumps(jsonable(obj), indent=2, allow_nan=False) + "\n")
 
 
+_SAVEZ_RESERVED = ("file", "allow_pickle")
+"""Keyword names of ``np.savez`` itself: an array of that name would not be saved as an array."""
+
+
 def atomic_savez(path: str | Path, arrays: dict[str, np.ndarray]) -> None:
     """``np.savez`` of ``arrays`` to ``path`` atomically."""
-    _atomic(path, "wb", lambda fh: np.savez(fh, **arrays))
+    clash = [k for k in _SAVEZ_RESERVED if k in arrays]
+    if clash:
+        raise ValueError(f"array names {clash} are np.savez keywords and cannot be saved")
+    # every remaining key is an array name, so the keywords are all arrays (typed Any: np.savez
+    # also takes ``allow_pickle: bool`` as a keyword, which mypy matches against **arrays)
+    named: dict[str, Any] = dict(arrays)
+    _atomic(path, "wb", lambda fh: np.savez(fh, **named))

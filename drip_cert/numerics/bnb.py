@@ -100,7 +100,7 @@ def maximize(
     min_width: float = 0.0,
     active: Sequence[bool] | None = None,
     corners: bool = False,
-    initial: tuple[float, Sequence[float]] | None = None,
+    initial: tuple[float, Sequence[float] | np.ndarray] | None = None,
     prefer_deep: bool = False,
 ) -> BnbResult:
     """Best-first branch and bound for ``sup f`` over ``box``.

@@ -608,7 +608,7 @@ class MatrixEnclosure:
         self.shape = J.shape
         self.variables = tuple(variables)
         self._natural: list[_Fn] = []
-        self._mv: list[tuple[_Fn, list[_Fn]] | None] = []
+        self._mv: list[tuple[_Fn, list[_Fn | None]] | None] = []
         for e in J:
             e = sp.sympify(e)
             self._natural.append(compile_enclosure(e, variables, enclose))

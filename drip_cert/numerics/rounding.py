@@ -442,7 +442,7 @@ def _perron_upper_np(N: np.ndarray) -> np.ndarray:
     (floored) Perron vector of the symmetric part and with ``v = 1`` (the largest row sum).
     """
     n = N.shape[-1]
-    best = None
+    best: np.ndarray | None = None
     _, V = np.linalg.eigh(0.5 * (N + np.swapaxes(N, -1, -2)))
     v1 = np.abs(V[..., :, -1])
     v1 = np.maximum(v1, 1e-8 * v1.max(axis=-1, keepdims=True))
@@ -451,10 +451,11 @@ def _perron_upper_np(N: np.ndarray) -> np.ndarray:
         _, hi = matmul_bounds(N, v[..., :, None])
         q = up_np(hi[..., 0] / v).max(axis=-1)
         best = q if best is None else np.minimum(best, q)
+    assert best is not None  # the loop over the two test vectors always runs
     return best if n else np.zeros(N.shape[:-2])
 
 
-def sym_lambda_max_upper(S, R=None) -> np.ndarray:
+def sym_lambda_max_upper(S, R=None) -> np.ndarray | float:
     """Rigorous upper bound of ``lambda_max(sym A)`` for every ``A`` with ``|A - S| <= R``.
 
     Batched over leading axes (``S`` of shape ``(..., n, n)``); a float result per matrix, ``inf``

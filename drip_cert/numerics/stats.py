@@ -255,11 +255,11 @@ _CP_PREC = 128
 def _miss_probability(level: float | None, alpha: float | None) -> tuple[float, float, bool]:
     """``(level, miss, exact_miss)``: the float confidence of the scipy candidate, and the miss
     probability ``1 - level``, which is the given ``alpha`` itself when ``exact_miss``."""
-    if (level is None) == (alpha is None):
-        raise TypeError("give the confidence as exactly one of level and alpha = 1 - level")
-    if level is None:
+    if level is None and alpha is not None:
         return 1.0 - float(alpha), float(alpha), True
-    return float(level), 1.0 - float(level), False
+    if level is not None and alpha is None:
+        return float(level), 1.0 - float(level), False
+    raise TypeError("give the confidence as exactly one of level and alpha = 1 - level")
 
 
 def _proved_upper(k: int, n: int, candidate: float, tail: arb) -> float:

@@ -43,7 +43,7 @@ progress many times."""
 _TRUE_SCENARIOS = ("learned_true", "learned_l1_true")
 
 # Theta_ad and the step counter of L1-DRAC depend on time only: one copy for the whole batch
-_SHARED = L1State(x_hat=0, eta=0, lam_hat=0, theta=None, step=None)
+_SHARED: L1State[int | None] = L1State(x_hat=0, eta=0, lam_hat=0, theta=None, step=None)
 
 
 def build_chunk_fn(

@@ -1,11 +1,13 @@
 """TOML specifications: :func:`load_spec` reads a file into a :class:`Spec` (a System + settings).
 
-The format (documented in the README) has the sections ``[system]``, ``[dynamics]``,
-``[policy]``, ``[blocks.NAME]``, ``[uncertainty]``, ``[initial]``, and the optional settings
-tables ``[constants]`` (user-given values of paper constants), ``[contraction]``,
-``[l1drac]``, ``[tasil]`` and ``[simulation]``, each read into its typed settings object of
-:mod:`drip_cert.spec.settings` when the spec is loaded (``spec.settings``), so that a bad value
-or an unknown key is found before anything is computed. Every problem is a
+The format (documented in the README) has the sections ``[system]``, ``[dynamics]``
+(expressions ``f``, ``g`` or a linear model ``A``, ``B``), ``[policy]`` (an expert as
+expressions, as a gain ``{ K = [[...]] }`` or ``"lqr"`` with ``[policy.lqr]``: see
+:mod:`drip_cert.spec.linear`), ``[blocks.NAME]``, ``[uncertainty]``, ``[initial]``, and the
+optional settings tables ``[constants]`` (user-given values of paper constants),
+``[contraction]``, ``[l1drac]``, ``[tasil]`` and ``[simulation]``, each read into its typed
+settings object of :mod:`drip_cert.spec.settings` when the spec is loaded (``spec.settings``),
+so that a bad value or an unknown key is found before anything is computed. Every problem is a
 :class:`~drip_cert.errors.SpecError` naming the file, the field and the fix.
 """
 
@@ -25,12 +27,13 @@ from drip_cert.errors import SpecError
 from drip_cert.model.blocks import Block, load_mlp_block
 from drip_cert.model.expr import CONSTANTS, FUNCTIONS, parse_expression
 from drip_cert.model.system import System
-from drip_cert.spec.settings import TABLES, Settings
+from drip_cert.spec.linear import ExpertGain, gain_expert, linear_dynamics, linearise, lqr_expert
+from drip_cert.spec.settings import TABLES, Settings, toml_text
 
 SECTIONS = {
     "system": {"name", "states", "inputs", "horizon", "time", "brownian_dim"},
-    "dynamics": {"f", "g", "diffusion"},
-    "policy": {"expert", "learned"},
+    "dynamics": {"f", "g", "A", "B", "diffusion"},
+    "policy": {"expert", "learned", "lqr"},
     "blocks": None,  # table of tables, checked per block
     "uncertainty": {"drift", "diffusion", "Delta_mu", "Delta_sigma"},
     "initial": {"support", "true_support"},
@@ -44,7 +47,7 @@ SECTIONS = {
 BLOCK_KEYS = {"kind", "weights", "inputs", "outputs", "activation"}
 REQUIRED = {
     "system": {"name", "states", "horizon"},
-    "dynamics": {"f", "g"},
+    "dynamics": set(),  # f and g, or A and B: checked by _dynamics_form
     "policy": {"expert"},
     "initial": {"support"},
 }
@@ -53,12 +56,15 @@ REQUIRED = {
 @dataclass(frozen=True, eq=False)
 class Spec:
     """A loaded specification: the :class:`System`, the raw settings tables and their typed,
-    validated form ``settings`` (built from ``tables`` when not given)."""
+    validated form ``settings`` (built from ``tables`` when not given), and ``expert_gain``: how
+    a linear expert ``u = -K x`` was given (``{ K = ... }`` or ``"lqr"``, with ``Q``, ``R`` and
+    the closed-loop eigenvalues; ``None`` for an expert written as expressions)."""
 
     path: Path | None
     system: System
     tables: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)
     settings: Settings = None  # type: ignore[assignment]  # built in __post_init__
+    expert_gain: ExpertGain | None = None
 
     def __post_init__(self) -> None:
         if self.settings is None:
@@ -69,6 +75,12 @@ class Spec:
                 support=self.system.support,
             )
             object.__setattr__(self, "settings", settings)
+
+    @property
+    def notes(self) -> tuple[str, ...]:
+        """Lines a report should carry about how the spec defined the system (the origin of a
+        gain expert: given K, or LQR with its Q, R and closed-loop eigenvalues)."""
+        return () if self.expert_gain is None else (self.expert_gain.note,)
 
     def table(self, name: str) -> Mapping[str, Any]:
         """A raw settings table (``constants``, ``contraction``, ``l1drac``, ``tasil``,
@@ -243,12 +255,48 @@ def spec_from_dict(doc: Mapping[str, Any], path: Path | None = None) -> Spec:
         return out
 
     dyn = doc["dynamics"]
-    f = vector(dyn["f"], "dynamics.f", n)
-    g = matrix(dyn["g"], "dynamics.g", n, only_t=True)
+    linear_model = None
+    if _dynamics_form(dyn, err) == "linear":
+        f, g, A_lin, B_lin = linear_dynamics(dyn, n, states, spath)
+        linear_model = (A_lin, B_lin)
+    else:
+        f = vector(dyn["f"], "dynamics.f", n)
+        g = matrix(dyn["g"], "dynamics.g", n, only_t=True)
     m = len(g[0])
     diffusion = matrix(dyn["diffusion"], "dynamics.diffusion", n) if "diffusion" in dyn else None
     pol = doc["policy"]
-    expert = vector(pol["expert"], "policy.expert", m, allow_t=False)
+    expert_val = pol["expert"]
+    expert_gain = None
+    if "lqr" in pol and expert_val != "lqr":
+        raise err(
+            f"the table [policy.lqr] is given but expert = {toml_text(expert_val)}; write "
+            'expert = "lqr" to use it, or remove [policy.lqr]',
+            "policy.lqr",
+        )
+
+    def design() -> tuple[Any, Any, bool]:
+        """The linear model the gain is designed on / checked against: (A, B, linearised)."""
+        if linear_model is not None:
+            return (*linear_model, False)
+        return (*linearise(f, g, states, t, spath), True)
+
+    if isinstance(expert_val, list):
+        expert = vector(expert_val, "policy.expert", m, allow_t=False)
+    elif isinstance(expert_val, dict):
+        try:
+            model = design()
+        except SpecError:
+            model = None  # a given K needs no linearisation: no closed-loop poles to record
+        expert, expert_gain = gain_expert(expert_val, m, states, model, spath)
+    elif expert_val == "lqr":
+        expert, expert_gain = lqr_expert(pol.get("lqr"), states, design(), spath)
+    else:
+        raise err(
+            f"expert = {toml_text(expert_val)} is not allowed: the expert must be a list of {m} "
+            f"expression(s) (one per input), a gain expert = {{ K = [[...]] }} ({m} x {n}, "
+            'u = -K x) or expert = "lqr" with a table [policy.lqr] holding Q and R',
+            "policy.expert",
+        )
     learned = (
         vector(pol["learned"], "policy.learned", m, allow_t=False) if "learned" in pol else None
     )
@@ -322,7 +370,36 @@ def spec_from_dict(doc: Mapping[str, Any], path: Path | None = None) -> Spec:
         raise SpecError(str(exc), path=spath) from None
     tables = MappingProxyType({k: MappingProxyType(dict(doc[k])) for k in TABLES if k in doc})
     settings = Settings.from_tables(tables, n, path=spath, support=system.support)
-    return Spec(path=path, system=system, tables=tables, settings=settings)
+    return Spec(path=path, system=system, tables=tables, settings=settings, expert_gain=expert_gain)
+
+
+def _dynamics_form(dyn: Mapping[str, Any], err) -> str:
+    """``"expressions"`` (f, g) or ``"linear"`` (A, B); both, or half of one, is an error."""
+    expr_keys = sorted({"f", "g"} & set(dyn))
+    lin_keys = sorted({"A", "B"} & set(dyn))
+    if expr_keys and lin_keys:
+        raise err(
+            f"[dynamics] gives both {expr_keys} (expressions) and {lin_keys} (a linear model); "
+            "write the dynamics either as f, g or as A, B (f = A x, g = B), not both: remove "
+            + ", ".join(lin_keys)
+            + " or "
+            + ", ".join(expr_keys),
+            f"dynamics.{lin_keys[0]}",
+        )
+    if lin_keys:
+        if len(lin_keys) < 2:
+            other = "B" if lin_keys == ["A"] else "A"
+            raise err(
+                f"missing key(s) ['{other}'] in [dynamics]: a linear model needs both A (n x n) "
+                "and B (n x m)",
+                f"dynamics.{other}",
+            )
+        return "linear"
+    missing = sorted({"f", "g"} - set(expr_keys))
+    if missing:
+        hint = " (or a linear model: A and B)" if not expr_keys else ""
+        raise err(f"missing key(s) {missing} in [dynamics]{hint}", f"dynamics.{missing[0]}")
+    return "expressions"
 
 
 def _names(val: Any, fld: str, err) -> list[str]:

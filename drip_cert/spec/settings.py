@@ -24,7 +24,9 @@ import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from types import MappingProxyType
-from typing import Any
+from typing import Any, TypedDict
+
+import numpy as np
 
 from drip_cert.errors import SpecError
 from drip_cert.provenance import Scope
@@ -228,6 +230,44 @@ def one_of(value: Any, f: Field, choices: Sequence[Any]) -> Any:
     return value
 
 
+METRIC_CHOICES = ("auto", "euclidean", "lmi")
+
+
+def metric_choice(
+    value: Any, f: Field, n: int | None
+) -> tuple[str, tuple[tuple[float, ...], ...] | None]:
+    """``[contraction] metric``: ``"auto"`` (certify in the coordinates of an LMI metric when the
+    Euclidean rate fails or is slower), ``"euclidean"`` (never), ``"lmi"`` (always, when one is
+    found), a given ``n x n`` symmetric positive definite matrix ``P``, or ``true`` / ``false``
+    (``"auto"`` / ``"euclidean"``)."""
+    if isinstance(value, bool):
+        return ("auto" if value else "euclidean"), None
+    if isinstance(value, str):
+        return one_of(value, f, METRIC_CHOICES), None
+    rule = (
+        'one of "auto", "euclidean", "lmi", true, false, or a symmetric positive definite '
+        f"{n} x {n} matrix P"
+    )
+    if not isinstance(value, list) or n is None or len(value) != n:
+        raise f.error(value, rule)
+    rows = []
+    for row in value:
+        if not isinstance(row, list) or len(row) != n:
+            raise f.error(value, rule)
+        for v in row:
+            if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
+                raise f.error(value, rule)
+        rows.append(tuple(float(v) for v in row))
+    P = np.array(rows)
+    if not np.array_equal(P, P.T):
+        raise f.error(value, rule, "P must be exactly symmetric (P[i][j] == P[j][i])")
+    try:
+        np.linalg.cholesky(P)
+    except np.linalg.LinAlgError:
+        raise f.error(value, rule, "P must be positive definite") from None
+    return "given", tuple(rows)
+
+
 def string(value: Any, f: Field) -> str:
     """A non-empty string."""
     if not isinstance(value, str) or not value.strip():
@@ -362,8 +402,10 @@ class ContractionSettings:
     region: tuple[tuple[float, float], ...] | None = None
     tol: float = 1e-3
     max_boxes: int = 4000
-    metric: bool = True
+    metric: bool = True  #: search an LMI contraction metric (false only for "euclidean")
     max_time: float = 20.0  #: seconds of interval branch and bound per closed loop
+    coordinates: str = "auto"  #: "auto", "euclidean", "lmi" or "given" (a P in ``metric``)
+    P: tuple[tuple[float, ...], ...] | None = None  #: the given metric
     given: frozenset[str] = field(default=frozenset(), compare=False, repr=False)
 
     KEYS = MappingProxyType(
@@ -372,7 +414,7 @@ class ContractionSettings:
             "region": "box where the rate is proved; default the support of [initial]",
             "tol": "gap between the upper and lower bound of the interval branch and bound",
             "max_boxes": "largest number of boxes of the interval branch and bound",
-            "metric": "also search an LMI contraction metric",
+            "metric": 'certify in metric coordinates: "auto", "euclidean", "lmi" or a matrix P',
             "max_time": "seconds of branch and bound per closed loop",
         }
     )
@@ -404,13 +446,17 @@ class ContractionSettings:
                     "the initial law: a rate proved there says nothing about trajectories that "
                     "start outside it; give a region that contains [initial] support",
                 )
+        choice = r.get("metric", metric_choice, "auto", n)
+        coords, P = ("auto", None) if choice == "auto" else choice
         return cls(
             method=r.get("method", one_of, d["method"], CONTRACTION_METHODS),
             region=region,
             tol=r.get("tol", positive_float, d["tol"]),
             max_boxes=r.get("max_boxes", positive_int, d["max_boxes"]),
-            metric=r.get("metric", boolean, d["metric"]),
+            metric=coords != "euclidean",
             max_time=r.get("max_time", positive_or_inf, d["max_time"]),
+            coordinates=coords,
+            P=P,
             given=r.given,
         )
 
@@ -487,7 +533,19 @@ class L1Settings:
         )
 
 
-def read_l1_design(r: TableReader) -> dict[str, float | None]:
+class L1DesignValues(TypedDict):
+    """The design parameters read by :func:`read_l1_design` (keywords of
+    :class:`L1Settings` and of :class:`~drip_cert.bounds.l1drac.request.DesignRequest`)."""
+
+    lambda_s: float | None
+    omega: float | None
+    Ts: float | None
+    rho_r: float | None
+    rho_a: float | None
+    delta: float | None
+
+
+def read_l1_design(r: TableReader) -> L1DesignValues:
     """The L1-DRAC design parameters of a table, ``None`` where absent: ``lambda_s``, ``omega``,
     ``Ts``, ``rho_r``, ``rho_a`` (finite numbers > 0; absent = let the designer find it) and
     ``delta`` (a probability in (0, 1); absent = no kappa).
@@ -496,17 +554,18 @@ def read_l1_design(r: TableReader) -> dict[str, float | None]:
     constants file (:mod:`drip_cert.bounds.l1drac.toml`), whose keys mean the same
     (:attr:`L1Settings.KEYS`).
     """
-    out: dict[str, float | None] = {}
-    for key, example in (
-        ("lambda_s", 10.0),
-        ("omega", 50.0),
-        ("Ts", 1e-3),
-        ("rho_r", 1.0),
-        ("rho_a", 1.0),
-    ):
-        out[key] = r.get(key, positive_float, None, example=example)
-    out["delta"] = r.get("delta", probability, None, example=0.05)
-    return out
+
+    def positive(key: str, example: float) -> float | None:
+        return r.get(key, positive_float, None, example=example)
+
+    return {  # read in this order (the order of the error messages)
+        "lambda_s": positive("lambda_s", 10.0),
+        "omega": positive("omega", 50.0),
+        "Ts": positive("Ts", 1e-3),
+        "rho_r": positive("rho_r", 1.0),
+        "rho_a": positive("rho_a", 1.0),
+        "delta": r.get("delta", probability, None, example=0.05),
+    }
 
 
 # ------------------------------------------------------------------------------ [tasil]
@@ -690,6 +749,7 @@ __all__ = [
     "ConstantsTable",
     "ContractionSettings",
     "Field",
+    "L1DesignValues",
     "L1Settings",
     "Settings",
     "SimSettings",

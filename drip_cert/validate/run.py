@@ -163,6 +163,18 @@ def validate(
         )
     T = float(horizon or s.horizon)
     notes: list[str] = []
+    coords = getattr(cert, "coordinates", None)
+    x0_box, theta = None, None
+    if coords is not None:
+        # like with like: the certificate's bounds are about the system in z = Theta x; simulate
+        # that system from the push-forward of the initial law (docs/math/contraction.md 5.3)
+        x0_box, theta = s.support, coords.theta
+        s = cert.system
+        notes.append(
+            "validated in the certificate's coordinates z = Theta x: every empirical gap and "
+            "bound below is in z; in x the gaps are at most factor_to_x = "
+            f"{coords.to_x:.6g} times these (Proposition 5.3 of docs/math/contraction.md)"
+        )
     design = cert.l1.design if (cert.l1 is not None and cert.l1.feasible) else None
     at_cert = False
     if design is not None:
@@ -190,9 +202,9 @@ def validate(
                 "no feasible L1-DRAC design is certified: the L1 run uses practical "
                 "parameters and no uncertainty bound is checked"
             )
-    rho_tasil = cert.rho_tasil
+    rho_tasil = cert.rho_tasil_native
     delta_tasil = cert.tasil.delta if cert.tasil is not None else None
-    rho_l1 = cert.rho_l1
+    rho_l1 = cert.rho_l1_native
     p = design.p if design is not None else 1
     kappa = design.kappa if design is not None else None
     delta_l1 = design.delta if design is not None else None
@@ -215,6 +227,8 @@ def validate(
         w2_times=(T,),
         run_dir=run_dir,
         progress=progress,
+        x0_box=x0_box,
+        theta=theta,
     )
     checks = checks_from_result(
         res,
@@ -253,6 +267,8 @@ def validate(
                 record_every=SHORT_STEPS // 100,
                 kappas=kappas,
                 p_max=max(4, 2 * p),
+                x0_box=x0_box,
+                theta=theta,
             )
             short_checks = checks_from_result(
                 sres,

@@ -20,15 +20,18 @@ MIN_SIMULABLE_TS = 1e-9
 #: entirely, so a run at such T_s says nothing about the certificate
 
 
-def x0_sampler(box) -> Any:
-    """Uniform initial law on the box ``D`` (jax key -> state)."""
+def x0_sampler(box, theta: np.ndarray | None = None) -> Any:
+    """Uniform initial law on the box ``D`` (jax key -> state); with ``theta``, its push-forward
+    by ``z = theta x`` (the initial law of a system in metric coordinates)."""
     from drip_cert._jax import jax, jnp  # jax: keep off the API's import path
 
     b = np.array(box, dtype=float)
     lo, hi = jnp.asarray(b[:, 0]), jnp.asarray(b[:, 1])
+    th = None if theta is None else jnp.asarray(theta, dtype=jnp.float64)
 
     def sample(key):
-        return jax.random.uniform(key, (b.shape[0],), minval=lo, maxval=hi, dtype=jnp.float64)
+        x = jax.random.uniform(key, (b.shape[0],), minval=lo, maxval=hi, dtype=jnp.float64)
+        return x if th is None else th @ x
 
     return sample
 
@@ -52,8 +55,13 @@ def run_scenarios(
     w2_times: tuple[float, ...] = (),
     run_dir: Path | None = None,
     progress: bool = False,
+    x0_box: Any = None,
+    theta: np.ndarray | None = None,
 ):
-    """Simulate the four scenarios of the DRIP paper for ``s`` (with its learned policy)."""
+    """Simulate the four scenarios of the DRIP paper for ``s`` (with its learned policy).
+
+    Initial states are uniform on ``x0_box`` (default ``s.support``), mapped by ``theta`` when
+    ``s`` is a system in coordinates ``z = theta x``."""
     from drip_cert.sim.config import SimConfig  # jax: keep off the API's import path
     from drip_cert.sim.engine import simulate  # jax: keep off the API's import path
 
@@ -70,4 +78,5 @@ def run_scenarios(
         w2_times=w2_times,
         w2_points=min(2000, max(2, paths // 2)),
     )
-    return simulate(s.numeric, cfg, x0_sampler(s.support), run_dir=run_dir, progress=progress)
+    box = s.support if x0_box is None else x0_box
+    return simulate(s.numeric, cfg, x0_sampler(box, theta), run_dir=run_dir, progress=progress)

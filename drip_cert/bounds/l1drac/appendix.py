@@ -60,8 +60,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from drip_cert.bounds.l1drac.backend import FLOAT, FloatOps, Real
-from drip_cert.bounds.l1drac.constants import L1Constants
+from drip_cert.bounds.l1drac.backend import FLOAT, Backend, Real
+from drip_cert.bounds.l1drac.constants import L1ConstantsLike
 
 __all__ = [
     "frak_p",
@@ -92,22 +92,22 @@ _PHI2_SERIES_BELOW = 1e-2
 # --------------------------------------------------------------------------------------------
 
 
-def frak_p(p: int, num: FloatOps = FLOAT) -> Real:
+def frak_p(p: int, num: Backend = FLOAT) -> Real:
     """Fraktur p(p) = (p (p - 1) / 2)^{1/2}; implements (A.1a) of L1-DRAC (zero at p = 1)."""
     return num.sqrt(num.const(p * (p - 1)) / 2.0)
 
 
-def frak_p_prime(p: int, num: FloatOps = FLOAT) -> Real:
+def frak_p_prime(p: int, num: Backend = FLOAT) -> Real:
     """Fraktur p'(p) = (p (2p - 1) / 2)^{1/2}; implements (A.1a) of L1-DRAC."""
     return num.sqrt(num.const(p * (2 * p - 1)) / 2.0)
 
 
-def frak_p_dprime(p: int, num: FloatOps = FLOAT) -> Real:
+def frak_p_dprime(p: int, num: Backend = FLOAT) -> Real:
     """Fraktur p''(p) = (p (4p - 1))^{1/2}; implements (A.1a) of L1-DRAC."""
     return num.sqrt(num.const(p * (4 * p - 1)))
 
 
-def lip_indicator(c: L1Constants) -> float:
+def lip_indicator(c: L1ConstantsLike) -> float:
     """1_Lip(f): 1.0 when Assumption 8 (global Lipschitz f) holds, else 0.0; (A.1b) of L1-DRAC."""
     return 1.0 if c.lip_f else 0.0
 
@@ -156,10 +156,10 @@ class RefConstants:
     oast_1: Real
     oast_2: Real
     oast_3: Real
-    num: FloatOps = FLOAT
+    num: Backend = FLOAT
 
 
-def reference_hats(c: L1Constants, p: int) -> tuple[Real, Real, Real, Real]:
+def reference_hats(c: L1ConstantsLike, p: int) -> tuple[Real, Real, Real, Real]:
     """hat-Delta^r_{1..4}(p); implements (A.2a) and (A.2b) of L1-DRAC.
 
     Returns
@@ -181,7 +181,7 @@ def reference_hats(c: L1Constants, p: int) -> tuple[Real, Real, Real, Real]:
     return h1, h2, h3, h4
 
 
-def reference_constants(c: L1Constants, p: int) -> RefConstants:
+def reference_constants(c: L1ConstantsLike, p: int) -> RefConstants:
     """All reference-process constants at moment order p; implements (A.2)-(A.7) of L1-DRAC.
 
     Parameters
@@ -286,10 +286,10 @@ class TrueConstants:
     oast_1: Real
     oast_2: Real
     oast_3: Real
-    num: FloatOps = FLOAT
+    num: Backend = FLOAT
 
 
-def true_constants(c: L1Constants, p: int) -> TrueConstants:
+def true_constants(c: L1ConstantsLike, p: int) -> TrueConstants:
     """All true-process constants at moment order p; implements (A.8)-(A.12) of L1-DRAC.
 
     The paper's (A.10b) prints hat-Delta_6 in Delta_{odot_4}; it is hat-Delta_5 (see the module
@@ -344,7 +344,7 @@ def true_constants(c: L1Constants, p: int) -> TrueConstants:
 # --------------------------------------------------------------------------------------------
 
 
-def _phi2(x: Real, num: FloatOps) -> Real:
+def _phi2(x: Real, num: Backend) -> Real:
     """(e^x - 1 - x) / x^2 to full relative precision (series for small |x|).
 
     For ``|x| < 1e-2`` the series ``sum_{k>=0} x^k / (k+2)!`` is summed to ``k = n - 1`` with
@@ -363,7 +363,7 @@ def _phi2(x: Real, num: FloatOps) -> Real:
     return (num.expm1(x) - x) / (x * x)
 
 
-def _one_minus_ratio(omega: Real, lambda_s: Real, Ts: Real, num: FloatOps) -> Real:
+def _one_minus_ratio(omega: Real, lambda_s: Real, Ts: Real, num: Backend) -> Real:
     """1 - (lambda_s/omega) (e^{omega Ts} - 1)/(e^{lambda_s Ts} - 1), without cancellation.
 
     With e(x) = x + x^2 phi2(x): omega e(lambda_s T) - lambda_s e(omega T)
@@ -388,7 +388,7 @@ class SamplingConstants:
     in (A.13d), (A.14), (A.17)), which bounds the paper's values from above.
     """
 
-    consts: L1Constants
+    consts: L1ConstantsLike
     p: int
     omega: Real
     Ts: Real
@@ -415,11 +415,11 @@ class SamplingConstants:
     expm1_omega_Ts: Real  # e^{omega Ts} - 1, used by (A.18c)
     one_m_e2lam: Real  # 1 - e^{-2 lambda Ts}, used by (A.19a)
     one_m_e2omega: Real  # 1 - e^{-2 omega Ts}, used by (A.13d), (A.19a)
-    num: FloatOps = FLOAT  # the backend of ``consts``
+    num: Backend = FLOAT  # the backend of ``consts``
 
 
 def sampling_constants(
-    c: L1Constants,
+    c: L1ConstantsLike,
     p: int,
     omega: Real,
     Ts: Real,
@@ -593,7 +593,7 @@ def upsilon_minus(xi: Real, s: SamplingConstants) -> Real:
     )
 
 
-def upsilon_ring(xi: Real, c: L1Constants, p: int, omega: Real) -> Real:
+def upsilon_ring(xi: Real, c: L1ConstantsLike, p: int, omega: Real) -> Real:
     """ring-Upsilon(xi; p, omega); implements (A.19c) of L1-DRAC (independent of Ts)."""
     num = c.num
     xi, omega = num.const(xi), num.const(omega)

@@ -9,6 +9,7 @@ fast searches; :data:`ARB` (python-flint ``arb`` balls) re-evaluates the same co
 Public surface
 --------------
 * :data:`Real` -- a number of either backend.
+* :class:`Backend` -- the interface both backends provide (a structural type).
 * :class:`FloatOps`, :data:`FLOAT` -- the float64 backend.
 * :class:`ArbOps`, :data:`ARB` -- the Arb backend (use inside ``flint.ctx.workprec``).
 """
@@ -16,14 +17,55 @@ Public surface
 from __future__ import annotations
 
 import math
-from typing import Any, TypeAlias
+from typing import Any, Protocol, TypeAlias
 
 from flint import arb
 
-__all__ = ["Real", "FloatOps", "FLOAT", "ArbOps", "ARB"]
+__all__ = ["Real", "Backend", "FloatOps", "FLOAT", "ArbOps", "ARB"]
 
 #: A real number of the active backend: ``float`` (:data:`FLOAT`) or ``flint.arb`` (:data:`ARB`).
 Real: TypeAlias = Any
+
+
+class Backend(Protocol):
+    """What the generic formulas use of a backend; :class:`FloatOps` and :class:`ArbOps` provide it.
+
+    The two backends are used interchangeably (a constants object's ``num``) but are not
+    subclasses of one another: one returns floats, the other Arb balls.
+    """
+
+    @property
+    def series_terms(self) -> int:
+        """How many terms of a series in x with |x| < 1e-2 reach the backend's precision."""
+        ...
+
+    def const(self, x: Real, /) -> Real:
+        """A number of this backend equal to ``x``."""
+        ...
+
+    def sqrt(self, x: Real, /) -> Real:
+        """Square root."""
+        ...
+
+    def exp(self, x: Real, /) -> Real:
+        """e^x."""
+        ...
+
+    def expm1(self, x: Real, /) -> Real:
+        """e^x - 1."""
+        ...
+
+    def max(self, a: Real, b: Real, /) -> Real:
+        """max(a, b)."""
+        ...
+
+    def mid(self, x: Real, /) -> float:
+        """A float that chooses between two valid formulas."""
+        ...
+
+    def series_remainder(self, total: Real, x: Real, n: int, denom: float, /) -> Real:
+        """``total`` plus the remainder of a truncated series."""
+        ...
 
 
 class FloatOps:
@@ -68,11 +110,12 @@ class FloatOps:
 FLOAT = FloatOps()
 
 
-class ArbOps(FloatOps):
+class ArbOps:
     """The Arb backend (python-flint ``arb`` balls).
 
-    Same methods as :class:`FloatOps`; every result is a ball that contains the exact value. Use
-    inside ``flint.ctx.workprec`` (:func:`drip_cert.bounds.l1drac.verify.verify_conditions` does).
+    Same methods as :class:`FloatOps` (both are a :class:`Backend`); every result is a ball that
+    contains the exact value. Use inside ``flint.ctx.workprec``
+    (:func:`drip_cert.bounds.l1drac.verify.verify_conditions` does).
     """
 
     #: Terms of a series in x with |x| < 1e-2 (as in _phi2): the remainder x^20/22! < 1e-61

@@ -30,7 +30,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 from drip_cert.bounds.l1drac.appendix import RefConstants, TrueConstants
-from drip_cert.bounds.l1drac.conditions import float_conditions
+from drip_cert.bounds.l1drac.conditions import DesignPoint, float_conditions
 from drip_cert.bounds.l1drac.constants import L1Constants
 from drip_cert.bounds.l1drac.request import DesignRequest
 from drip_cert.bounds.l1drac.searches import max_Ts, min_rho_a
@@ -82,7 +82,7 @@ def _verified_factor(
     omega: float,
     name: str,
     which: tuple[str, ...],
-    point: Callable[[float], dict[str, float | None]],
+    point: Callable[[float], DesignPoint],
 ) -> tuple[float, str]:
     """The first factor of :func:`backoff_factors` at which the conditions ``which`` hold at
     ``point(factor)`` both Arb-verified and in float64, else the first Arb-verified one; when none
@@ -146,7 +146,7 @@ def back_off(
     factors: list[tuple[str, float]] = []
 
     def search(
-        name: str, which: tuple[str, ...], point: Callable[[float], dict[str, float | None]]
+        name: str, which: tuple[str, ...], point: Callable[[float], DesignPoint]
     ) -> tuple[float, str]:
         fac, why = _verified_factor(c, rc, tc, p, omega, name, which, point)
         factors.append((name, fac))

@@ -12,6 +12,7 @@ Public surface
 * :func:`condition_16a`, :func:`condition_16b`, :func:`condition_21a`, :func:`condition_21b`,
   :func:`condition_24` -- one condition at one point.
 * :func:`evaluate_conditions` -- all five at a fully specified point.
+* :class:`DesignPoint` -- the keywords ``rho_r``, ``rho_a``, ``lambda_s``, ``Ts`` of a point.
 
 The argument checks (:func:`check_p`, :func:`check_omega`, :func:`check_Ts`), the float64
 conditions on precomputed constants (:func:`float_16a` ... :func:`float_24`,
@@ -24,7 +25,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, TypedDict, Unpack
 
 from drip_cert.bounds.l1drac.appendix import (
     RefConstants,
@@ -54,10 +55,29 @@ __all__ = [
     "condition_21b",
     "condition_24",
     "evaluate_conditions",
+    "DesignPoint",
 ]
 
 #: e^{x} overflows float64 beyond x = 709.78; omega*Ts and lambda_s*Ts are kept below this.
 EXP_ARG_MAX = 700.0
+
+
+class DesignPoint(TypedDict, total=False):
+    """The design point beside ``(p, omega)``, as keywords of :func:`float_conditions`,
+    :func:`with_arb_margins` and :func:`~drip_cert.bounds.l1drac.verify.verify_conditions`
+    (a parameter left out or None is not given)."""
+
+    rho_r: float | None
+    rho_a: float | None
+    lambda_s: float | None
+    Ts: float | None
+
+
+def _given(eq: str, name: str, value: float | None) -> float:
+    """``value``, which condition ``eq`` needs (TypeError naming it when it is None)."""
+    if value is None:
+        raise TypeError(f"condition ({eq}) needs {name}, which was not given")
+    return value
 
 
 @dataclass(frozen=True)
@@ -146,11 +166,12 @@ def check_p(c: L1Constants, p: Any) -> int:
     return p
 
 
-def check_Ts(c: L1Constants, omega: float, lambda_s: float, Ts: float) -> None:
+def check_Ts(c: L1Constants, omega: float, lambda_s: float | None, Ts: float | None) -> None:
     """SpecError unless lambda_s and Ts are finite numbers > 0 with no overflow of e^{x Ts}."""
     for name, v in (("lambda_s", lambda_s), ("Ts", Ts)):
-        if not (is_real(v) and math.isfinite(v) and v > 0):
+        if v is None or not (is_real(v) and math.isfinite(v) and v > 0):
             raise SpecError(f"{v!r} must be a finite number > 0", field=name)
+    assert lambda_s is not None and Ts is not None  # each was checked in the loop above
     if max(omega, lambda_s, 2.0 * c.lam) * Ts > EXP_ARG_MAX:
         raise SpecError(
             f"Ts = {Ts!r} is so long that e^(max(omega, lambda_s, 2 lambda) Ts) overflows; such a "
@@ -220,11 +241,22 @@ def float_conditions(
 ) -> tuple[ConditionResult, ...]:
     """The float64 results of the conditions ``which``, in that order, at one point."""
     make = {
-        "16a": lambda: float_16a(c, rc, omega, rho_r),
-        "21a": lambda: float_21a(c, rc, omega, rho_r),
-        "16b": lambda: float_16b(c, tc, omega, rho_a),
-        "21b": lambda: float_21b(c, tc, omega, rho_r, rho_a),
-        "24": lambda: float_24(c, tc, p, omega, lambda_s, Ts, rho_r, rho_a),
+        "16a": lambda: float_16a(c, rc, omega, _given("16a", "rho_r", rho_r)),
+        "21a": lambda: float_21a(c, rc, omega, _given("21a", "rho_r", rho_r)),
+        "16b": lambda: float_16b(c, tc, omega, _given("16b", "rho_a", rho_a)),
+        "21b": lambda: float_21b(
+            c, tc, omega, _given("21b", "rho_r", rho_r), _given("21b", "rho_a", rho_a)
+        ),
+        "24": lambda: float_24(
+            c,
+            tc,
+            p,
+            omega,
+            _given("24", "lambda_s", lambda_s),
+            _given("24", "Ts", Ts),
+            _given("24", "rho_r", rho_r),
+            _given("24", "rho_a", rho_a),
+        ),
     }
     return tuple(make[eq]() for eq in which)
 
@@ -234,7 +266,7 @@ def with_arb_margins(
     p: int,
     results: tuple[ConditionResult, ...],
     omega: float,
-    **point: float | None,
+    **point: Unpack[DesignPoint],
 ) -> tuple[ConditionResult, ...]:
     """``results`` with their Arb-verified margins (one Arb evaluation for all of them).
 
@@ -255,7 +287,7 @@ def with_arb_margins(
 
 
 def _evaluate(
-    c: L1Constants, p: int, which: tuple[str, ...], omega: float, **point: float | None
+    c: L1Constants, p: int, which: tuple[str, ...], omega: float, **point: Unpack[DesignPoint]
 ) -> tuple[ConditionResult, ...]:
     """The conditions ``which`` at one point: arguments checked, float64 verdicts, Arb margins."""
     p = check_p(c, p)

@@ -8,6 +8,7 @@ Public surface
 --------------
 * :data:`CONSTANT_NAMES` -- every key of a ``[constants]`` table, in the order of the paper.
 * :class:`L1Constants` -- the constants plus alpha, eps_r, eps_a (validated on construction).
+* :class:`L1ConstantsLike` -- the attributes the formulas read (L1Constants or its Arb view).
 * :func:`unmatched_gain_r`, :func:`unmatched_gain_a` -- the Assumption 7 factors of (16a), (16b).
 
 The validators :func:`is_real`, :func:`check_real` and :func:`check_int` are shared with
@@ -20,13 +21,19 @@ import math
 import numbers
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
-from typing import Any, ClassVar
+from typing import Any, ClassVar, Protocol
 
-from drip_cert.bounds.l1drac.backend import FLOAT, FloatOps, Real
+from drip_cert.bounds.l1drac.backend import FLOAT, Backend, Real
 from drip_cert.errors import AssumptionViolation, SpecError
 from drip_cert.spec.settings import POSITIVE_CONSTANTS
 
-__all__ = ["CONSTANT_NAMES", "L1Constants", "unmatched_gain_r", "unmatched_gain_a"]
+__all__ = [
+    "CONSTANT_NAMES",
+    "L1Constants",
+    "L1ConstantsLike",
+    "unmatched_gain_r",
+    "unmatched_gain_a",
+]
 
 # The constants of Assumptions 1-8 (ASCII names as in the TOML file; 'lambda' is the attribute
 # ``lam``), each with the assumption that defines it.
@@ -143,6 +150,142 @@ def _checked_reals(value_of: Callable[[str], Any], path: str | None) -> dict[str
     }
 
 
+class L1ConstantsLike(Protocol):
+    """The fields of :class:`L1Constants` and its ``num``, read-only: what the formulas read.
+
+    :class:`L1Constants` (floats, backend :data:`~drip_cert.bounds.l1drac.backend.FLOAT`) and
+    :class:`drip_cert.bounds.l1drac.verify.ArbConstants` (Arb balls, backend
+    :data:`~drip_cert.bounds.l1drac.backend.ARB`) both have them, so the same formulas evaluate
+    either (the reals typed :data:`~drip_cert.bounds.l1drac.backend.Real`). Read-only.
+    """
+
+    @property
+    def num(self) -> Backend: ...
+
+    @property
+    def lam(self) -> Real: ...
+
+    @property
+    def Delta_f(self) -> Real: ...
+
+    @property
+    def Delta_p(self) -> Real: ...
+
+    @property
+    def L_p(self) -> Real: ...
+
+    @property
+    def L_p_hat(self) -> Real: ...
+
+    @property
+    def Delta_g(self) -> Real: ...
+
+    @property
+    def Delta_g_dot(self) -> Real: ...
+
+    @property
+    def Delta_g_perp(self) -> Real: ...
+
+    @property
+    def Delta_Theta(self) -> Real: ...
+
+    @property
+    def Delta_star(self) -> Real: ...
+
+    @property
+    def p_star(self) -> int: ...
+
+    @property
+    def Delta_mu(self) -> Real: ...
+
+    @property
+    def Delta_sigma(self) -> Real: ...
+
+    @property
+    def Delta_mu_par(self) -> Real: ...
+
+    @property
+    def Delta_mu_perp(self) -> Real: ...
+
+    @property
+    def Delta_sigma_par(self) -> Real: ...
+
+    @property
+    def Delta_sigma_perp(self) -> Real: ...
+
+    @property
+    def Delta_p_par(self) -> Real: ...
+
+    @property
+    def Delta_p_perp(self) -> Real: ...
+
+    @property
+    def L_p_par(self) -> Real: ...
+
+    @property
+    def L_p_perp(self) -> Real: ...
+
+    @property
+    def L_p_par_hat(self) -> Real: ...
+
+    @property
+    def L_p_perp_hat(self) -> Real: ...
+
+    @property
+    def L_mu(self) -> Real: ...
+
+    @property
+    def L_mu_hat(self) -> Real: ...
+
+    @property
+    def L_mu_par(self) -> Real: ...
+
+    @property
+    def L_mu_par_hat(self) -> Real: ...
+
+    @property
+    def L_mu_perp(self) -> Real: ...
+
+    @property
+    def L_mu_perp_hat(self) -> Real: ...
+
+    @property
+    def L_sigma(self) -> Real: ...
+
+    @property
+    def L_sigma_hat(self) -> Real: ...
+
+    @property
+    def L_sigma_par(self) -> Real: ...
+
+    @property
+    def L_sigma_par_hat(self) -> Real: ...
+
+    @property
+    def L_sigma_perp(self) -> Real: ...
+
+    @property
+    def L_sigma_perp_hat(self) -> Real: ...
+
+    @property
+    def L_f(self) -> Real: ...
+
+    @property
+    def lip_f(self) -> bool: ...
+
+    @property
+    def m(self) -> int: ...
+
+    @property
+    def alpha(self) -> Real: ...
+
+    @property
+    def eps_r(self) -> Real: ...
+
+    @property
+    def eps_a(self) -> Real: ...
+
+
 @dataclass(frozen=True, kw_only=True)
 class L1Constants:
     """The constants of L1-DRAC's Assumptions 1-8 (Sec. 2.2), the initial distance and the slacks.
@@ -163,7 +306,7 @@ class L1Constants:
     :class:`drip_cert.bounds.l1drac.verify.ArbConstants` carries the Arb one.
     """
 
-    num: ClassVar[FloatOps] = FLOAT
+    num: ClassVar[Backend] = FLOAT
 
     lam: float
     Delta_f: float
@@ -289,11 +432,11 @@ class L1Constants:
         return unmatched_gain_a(self)
 
 
-def unmatched_gain_r(c: L1Constants) -> Real:
+def unmatched_gain_r(c: L1ConstantsLike) -> Real:
     """k_r = Delta_g_perp Delta_mu_perp / lambda, in [0, 1) by Assumption 7; the factor of (16a)."""
     return c.Delta_g_perp * c.Delta_mu_perp / c.lam
 
 
-def unmatched_gain_a(c: L1Constants) -> Real:
+def unmatched_gain_a(c: L1ConstantsLike) -> Real:
     """k_a = Delta_g_perp L_mu_perp / lambda, in [0, 1) by Assumption 7; the factor of (16b)."""
     return c.Delta_g_perp * c.L_mu_perp / c.lam

@@ -88,6 +88,8 @@ def _point(
 ) -> _Point:
     """rho_r, rho_a (and Ts when ``find_Ts``) at fixed omega, lambda_s; reasons for failures."""
     gap = abs(2.0 * c.lam - omega)
+    rho_r: float | None
+    rho_a: float | None
     if req.rho_r is not None:
         rho_r = req.rho_r
     else:
@@ -240,18 +242,21 @@ def design(c: L1Constants, req: DesignRequest) -> L1Design:
             return _point(c, rc, tc, req, omega, req.lambda_s, find_Ts=True), req.lambda_s
         if req.Ts is None:
             base = _point(c, rc, tc, req, omega, None, find_Ts=False)
-            if base.rho_a is None:
+            base_r, base_a = base.rho_r, base.rho_a
+            if base_r is None or base_a is None:  # _point finds rho_a only after rho_r
                 return base, None
 
             def neg_ts(ls: float) -> float:
-                t = max_Ts(c, tc, p, omega, ls, base.rho_r, base.rho_a)
+                t = max_Ts(c, tc, p, omega, ls, base_r, base_a)
                 return math.inf if t is None else -t
 
             ls, v = _log_search(neg_ts, ls_bounds[0], ls_bounds[1], None)
             return _point(c, rc, tc, req, omega, ls, find_Ts=True), ls
 
+        Ts_given = req.Ts  # not None here (the branch above returned)
+
         def rho_a_of(ls: float) -> float:
-            if max(omega, ls) * req.Ts > EXP_ARG_MAX:
+            if max(omega, ls) * Ts_given > EXP_ARG_MAX:
                 return math.inf
             pt = _point(c, rc, tc, req, omega, ls, find_Ts=False)
             return math.inf if pt.rho_a is None else pt.rho_a
@@ -274,12 +279,13 @@ def design(c: L1Constants, req: DesignRequest) -> L1Design:
                 pt_, _ = at_omega(w, _NESTED_GRID_POINTS)  # nested search: coarser grid
             else:
                 pt_ = _point(c, rc, tc, req, w, req.lambda_s, find_Ts=False)
-            if pt_.rho_a is None:
+            r_r, r_a = pt_.rho_r, pt_.rho_a
+            if r_r is None or r_a is None:  # _point finds rho_a only after rho_r
                 return math.inf
             if req.Ts is None:  # (24) must be satisfiable for some Ts: a positive budget
-                if not budget_24(c, tc, w, pt_.rho_r, pt_.rho_a) > 0.0:
+                if not budget_24(c, tc, w, r_r, r_a) > 0.0:
                     return math.inf
-            return pt_.rho_r + pt_.rho_a
+            return r_r + r_a
 
         omega, v = _log_search(rho_of, lo, hi, 2.0 * lam)
         if not math.isfinite(v):
@@ -316,13 +322,20 @@ def design(c: L1Constants, req: DesignRequest) -> L1Design:
         "21a": rho_r is not None,
         "16b": rho_a is not None,
         "21b": rho_a is not None,
-        "24": rho_a is not None and Ts is not None and lambda_s is not None,
+        # rho_r too: (24) reads it (implied: rho_a is only found after rho_r)
+        "24": rho_r is not None and rho_a is not None and Ts is not None and lambda_s is not None,
     }
     which = tuple(eq for eq in CONDITIONS if present[eq])
     conditions = float_conditions(
         c, rc, tc, p, omega, which, rho_r=rho_r, rho_a=rho_a, lambda_s=lambda_s, Ts=Ts
     )
-    if present["24"] and req.Ts is None:
+    if (
+        req.Ts is None
+        and rho_r is not None
+        and rho_a is not None
+        and Ts is not None
+        and lambda_s is not None
+    ):  # present["24"], spelt out
         env = float_24(c, tc, p, omega, lambda_s, Ts, rho_r, rho_a, envelope=True)
         notes.append(
             f"Ts is the largest value for which the monotone envelope of (24) holds, divided "

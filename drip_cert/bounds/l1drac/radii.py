@@ -81,12 +81,18 @@ def ultimate_bound(c: L1Constants, d: L1Design, t_hat: float) -> float:
         raise SpecError("the ultimate bound needs a feasible design", field="design")
     if not (is_real(t_hat) and t_hat >= 0.0 and math.isfinite(t_hat)):
         raise SpecError(f"{t_hat!r} must be a finite time >= 0", field="t_hat")
+    w, rho_r, rho_a = d.omega, d.rho_r, d.rho_a
+    if w is None or rho_r is None or rho_a is None:
+        raise SpecError(
+            "the ultimate bound needs omega, rho_r and rho_a; this design marked feasible lacks "
+            f"one (omega = {w!r}, rho_r = {rho_r!r}, rho_a = {rho_a!r})",
+            field="design",
+        )
     rc = reference_constants(c, d.p)
-    w = d.omega
     inner = (
         math.exp(-2.0 * c.lam * t_hat) * c.alpha**2
-        + c.k_r * d.rho_r**2
-        + gamma_r(d.rho_r, w, rc)
-        + theta_r(d.rho_r, w, rc) / abs(2.0 * c.lam - w)
+        + c.k_r * rho_r**2
+        + gamma_r(rho_r, w, rc)
+        + theta_r(rho_r, w, rc) / abs(2.0 * c.lam - w)
     )
-    return math.sqrt(inner) + d.rho_a
+    return math.sqrt(inner) + rho_a

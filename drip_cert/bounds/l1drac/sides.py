@@ -26,7 +26,7 @@ from drip_cert.bounds.l1drac.appendix import (
     upsilon_ring,
 )
 from drip_cert.bounds.l1drac.backend import Real
-from drip_cert.bounds.l1drac.constants import L1Constants, unmatched_gain_a, unmatched_gain_r
+from drip_cert.bounds.l1drac.constants import L1ConstantsLike, unmatched_gain_a, unmatched_gain_r
 
 __all__ = [
     "gamma_r",
@@ -192,7 +192,7 @@ def margin_of(eq: str, lhs: Real, rhs: Real) -> Real:
     return lhs - rhs if RELATIONS[eq] == ">=" else rhs - lhs
 
 
-def sides_16a(c: L1Constants, rc: RefConstants, omega: Real, rho_r: Real) -> tuple[Real, Real]:
+def sides_16a(c: L1ConstantsLike, rc: RefConstants, omega: Real, rho_r: Real) -> tuple[Real, Real]:
     """(16a): ``lhs = (1 - k_r) rho_r^2``, ``rhs = alpha^2 + Gamma_r(rho_r, p, omega) + eps_r``."""
     rho_r = c.num.const(rho_r)
     lhs = (1.0 - unmatched_gain_r(c)) * rho_r**2
@@ -200,7 +200,7 @@ def sides_16a(c: L1Constants, rc: RefConstants, omega: Real, rho_r: Real) -> tup
     return lhs, rhs
 
 
-def sides_16b(c: L1Constants, tc: TrueConstants, omega: Real, rho_a: Real) -> tuple[Real, Real]:
+def sides_16b(c: L1ConstantsLike, tc: TrueConstants, omega: Real, rho_a: Real) -> tuple[Real, Real]:
     """(16b): ``lhs = (1 - k_a) rho_a^2``, ``rhs = Gamma_a(rho_a, p, omega) + eps_a``."""
     rho_a = c.num.const(rho_a)
     lhs = (1.0 - unmatched_gain_a(c)) * rho_a**2
@@ -208,7 +208,7 @@ def sides_16b(c: L1Constants, tc: TrueConstants, omega: Real, rho_a: Real) -> tu
     return lhs, rhs
 
 
-def sides_21a(c: L1Constants, rc: RefConstants, omega: Real, rho_r: Real) -> tuple[Real, Real]:
+def sides_21a(c: L1ConstantsLike, rc: RefConstants, omega: Real, rho_r: Real) -> tuple[Real, Real]:
     """(21a): ``lhs = Theta_r / |2 lambda - omega|``,
     ``rhs = (1 - k_r) rho_r^2 - alpha^2 - Gamma_r``.
 
@@ -221,7 +221,7 @@ def sides_21a(c: L1Constants, rc: RefConstants, omega: Real, rho_r: Real) -> tup
 
 
 def budget_a(
-    c: L1Constants, tc: TrueConstants, omega: Real, rho_r: Real, rho_a: Real
+    c: L1ConstantsLike, tc: TrueConstants, omega: Real, rho_r: Real, rho_a: Real
 ) -> tuple[Real, Real, Real]:
     """``((1 - k_a) rho_a^2 - Gamma_a, Theta_a / |2 lambda - omega|, Gamma_a)``; (21b) and (24)."""
     num = c.num
@@ -231,14 +231,14 @@ def budget_a(
     return (1.0 - unmatched_gain_a(c)) * rho_a**2 - ga, th, ga
 
 
-def budget_24(c: L1Constants, tc: TrueConstants, omega: Real, rho_r: Real, rho_a: Real) -> Real:
+def budget_24(c: L1ConstantsLike, tc: TrueConstants, omega: Real, rho_r: Real, rho_a: Real) -> Real:
     """The right side of (24): ``(1 - k_a) rho_a^2 - Gamma_a - Theta_a / |2 lambda - omega|``."""
     b, th, _ = budget_a(c, tc, omega, rho_r, rho_a)
     return b - th
 
 
 def sides_21b(
-    c: L1Constants, tc: TrueConstants, omega: Real, rho_r: Real, rho_a: Real
+    c: L1ConstantsLike, tc: TrueConstants, omega: Real, rho_r: Real, rho_a: Real
 ) -> tuple[Real, Real]:
     """(21b): ``lhs = Theta_a / |2 lambda - omega|``, ``rhs = (1 - k_a) rho_a^2 - Gamma_a``."""
     rhs, lhs, _ = budget_a(c, tc, omega, rho_r, rho_a)
@@ -246,7 +246,7 @@ def sides_21b(
 
 
 def sides_24(
-    c: L1Constants,
+    c: L1ConstantsLike,
     tc: TrueConstants,
     p: int,
     omega: Real,

@@ -163,7 +163,8 @@ def l1_section(
             + ", ".join(f"{k} ({q[k].note})" for k in bad)
             + "; give them in [constants]",
         )
-    values = {k: v.value for k, v in q.items()}
+    # the [constants] mapping of L1Constants.from_mapping: reals, the ints p_star, m, the bool lip_f
+    values: dict[str, Any] = {k: v.value for k, v in q.items()}
     values.update(p_star=st.p_star, m=s.m, lip_f=bool(lip_f))
     if not lip_f:
         values["L_f"] = 0.0
@@ -182,6 +183,7 @@ def l1_section(
     )
     d = design(consts, req)
     rows: tuple[TradeoffRow, ...] = ()
-    if d.feasible:
+    # a feasible design has omega and lambda_s (condition (24) was verified)
+    if d.feasible and d.omega is not None and d.lambda_s is not None:
         rows = tradeoff_table(consts, d.p, d.omega, d.lambda_s)
     return L1Section(q, d, tradeoff=rows)

@@ -91,6 +91,50 @@ class ArbConstants:
 
     num = ARB
 
+    # the fields of L1Constants (set in __init__), declared so that an ArbConstants is an
+    # L1ConstantsLike for the type checker
+    lam: arb
+    Delta_f: arb
+    Delta_p: arb
+    L_p: arb
+    L_p_hat: arb
+    Delta_g: arb
+    Delta_g_dot: arb
+    Delta_g_perp: arb
+    Delta_Theta: arb
+    Delta_star: arb
+    p_star: int
+    Delta_mu: arb
+    Delta_sigma: arb
+    Delta_mu_par: arb
+    Delta_mu_perp: arb
+    Delta_sigma_par: arb
+    Delta_sigma_perp: arb
+    Delta_p_par: arb
+    Delta_p_perp: arb
+    L_p_par: arb
+    L_p_perp: arb
+    L_p_par_hat: arb
+    L_p_perp_hat: arb
+    L_mu: arb
+    L_mu_hat: arb
+    L_mu_par: arb
+    L_mu_par_hat: arb
+    L_mu_perp: arb
+    L_mu_perp_hat: arb
+    L_sigma: arb
+    L_sigma_hat: arb
+    L_sigma_par: arb
+    L_sigma_par_hat: arb
+    L_sigma_perp: arb
+    L_sigma_perp_hat: arb
+    L_f: arb
+    lip_f: bool
+    m: int
+    alpha: arb
+    eps_r: arb
+    eps_a: arb
+
     def __init__(self, c: L1Constants) -> None:
         for f in dataclasses.fields(c):
             v = getattr(c, f.name)
