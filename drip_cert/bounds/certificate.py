@@ -70,7 +70,6 @@ def analyse_contraction(s: System, which: str, opts: ContractionSettings) -> Con
     loop, the nominal system of the L1-DRAC layer).
     """
     from drip_cert._jax import jax, jnp  # jax: keep off the API's import path
-    from drip_cert.analysis.lmi import contraction_metric  # cvxpy: keep off the API's import path
 
     J = s.closed_loop_jacobian(which)
     box = np.array(opts.region if opts.region is not None else s.support, dtype=float)
@@ -103,12 +102,44 @@ def analyse_contraction(s: System, which: str, opts: ContractionSettings) -> Con
     metric, err = None, ""
     if opts.metric:
         try:
-            metric = contraction_metric(
-                J, s.states, box, s.t if depends_t else None, t_range, J_num=J_num, enclose=enclose
-            )
+            metric = _metric(s, which, opts, J_num=J_num, enclose=enclose)
         except DripCertError as exc:
             err = str(exc)
     return ContractionAnalysis(which, res, metric, err)
+
+
+def _metric(
+    s: System,
+    which: str,
+    opts: ContractionSettings,
+    *,
+    kappa: float | None = None,
+    J_num: Any = None,
+    enclose: Any = None,
+) -> Any:
+    """The LMI contraction metric of a closed loop on the contraction region (``kappa`` bounds
+    ``cond P``; default that of :func:`~drip_cert.analysis.lmi.contraction_metric`)."""
+    from drip_cert.analysis.lmi import (  # cvxpy: keep off the API's import path
+        DEFAULT_KAPPA,
+        contraction_metric,
+    )
+
+    J = s.closed_loop_jacobian(which)
+    box = np.array(opts.region if opts.region is not None else s.support, dtype=float)
+    depends_t = J.has(s.t)
+    t_range = (0.0, s.horizon) if depends_t else None
+    if enclose is None and s.blocks:
+        enclose = block_enclose_callback(s.blocks)
+    return contraction_metric(
+        J,
+        s.states,
+        box,
+        s.t if depends_t else None,
+        t_range,
+        J_num=J_num,
+        enclose=enclose,
+        kappa=DEFAULT_KAPPA if kappa is None else kappa,
+    )
 
 
 #: check ids of each part of the certificate (a part's verdict is that of its checks)
@@ -327,7 +358,10 @@ class Certificate:
                 "(docs/math/contraction.md section 5): rates, gains, constants, the TaSIL and "
                 "L1-DRAC sections and the system shown are in z; rho.* are mapped back to x by "
                 "factor_to_x >= ||Theta^{-1}||_2 (Proposition 5.3); input-space quantities "
-                "(h0, policy errors, the L1-DRAC input) are the same in both",
+                "(h0, policy errors, the L1-DRAC input) are the same in both; "
+                "contraction.metric_rate and contraction.expert.metric are the best "
+                "constant-metric rate found and its P in x; the metric used here was chosen "
+                "among the candidates (alternatives) by the final radius in x",
             }
         out["alternatives"] = [dict(a) for a in self.alternatives]
         return out
@@ -440,29 +474,54 @@ def certify(
     if opts.coordinates == "auto" and eu.holds and eu.rate >= metric.metric_rate:
         stage.done()
         return cert_x
-    change = coordinates_from_metric(
-        metric.P,
-        f"the LMI contraction metric of the expert closed loop (rate {metric.metric_rate:.6g})",
-    )
-    stage(f"the same certificate in z = Theta x (metric rate {metric.metric_rate:.6g})")
-    cert_z = _certify_in_metric(spec, change, demonstrations, stage)
+    # the metric that maximises the rate may have a large cond P, which inflates the radii mapped
+    # back to x: also try metrics with cond P capped lower, and choose by the final result
+    metrics = [metric]
+    for kappa in METRIC_KAPPAS:
+        if kappa < metric.cond_P:
+            try:
+                m = _metric(spec.system, "expert", opts, kappa=kappa)
+            except DripCertError:
+                continue
+            if m.metric_rate > 0 and (not eu.holds or m.metric_rate > eu.rate):
+                metrics.append(m)
+    in_z = []
+    for m in metrics:
+        change = coordinates_from_metric(
+            m.P,
+            f"the LMI contraction metric of the expert closed loop (rate {m.metric_rate:.6g}, "
+            f"cond P <= {m.kappa:g})",
+        )
+        stage(f"the certificate in z = Theta x (rate {m.metric_rate:.6g}, cond P {m.cond_P:.3g})")
+        in_z.append(_certify_in_metric(spec, change, demonstrations, stage))
     stage.done()
-    if opts.coordinates == "lmi":
-        chosen, other = cert_z, cert_x
-    else:
-        # z only when strictly better: a tie keeps the user's own coordinates
-        chosen = min((cert_x, cert_z), key=_preference)
-        other = cert_x if chosen is cert_z else cert_z
-    return dataclasses.replace(chosen, alternatives=(_summary(other),))
+    # z only when strictly better: a tie keeps the user's own coordinates (listed first)
+    pool = in_z if opts.coordinates == "lmi" else [cert_x, *in_z]
+    chosen = min(pool, key=_preference)
+    others = [c for c in [cert_x, *in_z] if c is not chosen]
+    chosen = dataclasses.replace(chosen, alternatives=tuple(_summary(c) for c in others))
+    if chosen.coordinates is not None:
+        # the best constant-metric rate found (in x: the rate-maximising LMI metric) is reported
+        # as contraction.metric_rate; the checks above use the metric chosen by the final radius
+        ce = dataclasses.replace(chosen.contraction_expert, metric=metric)
+        chosen = dataclasses.replace(chosen, contraction_expert=ce)
+    return chosen
+
+
+METRIC_KAPPAS = (10.0, 100.0)
+"""Caps of ``cond P`` tried besides the rate-maximising metric (when that one's ``cond P`` is
+larger): the candidates of the rate / condition-number trade-off of the coordinate choice."""
 
 
 _VERDICT_ORDER = {Verdict.CERTIFIED: 0, Verdict.CONDITIONAL: 1, Verdict.NOT_CERTIFIED: 2}
 
 
 def _preference(c: Certificate) -> tuple[int, float]:
-    """Better verdict first, then the smaller total radius in x (missing radii count as inf)."""
-    rho = c.rho if c.rho is not None else (c.rho_tasil if c.rho_tasil is not None else math.inf)
-    return _VERDICT_ORDER[c.verdict], rho
+    """Better verdict first, then the smaller radius in x: the sum of the radii that exist
+    (``rho``, or the one part computed), inf when none is finite."""
+    parts = [v for v in (c.rho_tasil, c.rho_l1) if v is not None]
+    rho = up(sum(parts)) if parts else math.inf
+    return _VERDICT_ORDER[c.verdict], rho if math.isfinite(rho) else math.inf
 
 
 def _summary(c: Certificate) -> dict[str, Any]:
@@ -470,6 +529,7 @@ def _summary(c: Certificate) -> dict[str, Any]:
         "coordinates": "x" if c.coordinates is None else "z = Theta x",
         "verdict": c.verdict.value,
         "expert_rate": json_float(c.contraction_expert.euclidean.rate),
+        "cond_theta": None if c.coordinates is None else json_float(c.coordinates.cond),
         "rho_tasil_x": json_float(c.rho_tasil) if c.rho_tasil is not None else None,
         "rho_l1_x": json_float(c.rho_l1) if c.rho_l1 is not None else None,
         "factor_to_x": None if c.coordinates is None else c.coordinates.to_x,
