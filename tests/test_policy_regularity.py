@@ -89,3 +89,32 @@ def test_certify_reports_the_failing_assumption(tmp_path, capsys):
     assert rc == 1
     assert "PolicyRegularity (b) fails for L_dpi_expert" in out
     assert "discontinuous where x2 = 0" in out
+
+
+def test_the_difference_cancels_shared_terms(tmp_path):
+    """pi* and pi_IL share 0.5 sin(x2)^3 (a compensation both carry): d(pi_IL - pi*) is constant,
+    so its Lipschitz constant is exactly 0, while the triangle bound adds the two policies' own
+    (equal, positive) constants."""
+    from drip_cert.analysis.policy_regularity import difference_jacobian_lipschitz
+
+    s, _ = _system(
+        tmp_path,
+        "0.5*sin(x2)**3 - x1 - 2*x2",
+        'learned = ["0.5*sin(x2)**3 - 1.02*x1 - 1.98*x2"]',
+    )
+    tri = jacobian_lipschitz(s, "learned", BOX).value + jacobian_lipschitz(s, "expert", BOX).value
+    assert tri > 1.0
+    d = difference_jacobian_lipschitz(s, BOX)
+    assert d is not None and d.value == 0.0 and d.how == How.EXACT and d.scope.all_x
+
+
+def test_the_difference_bound_is_sound_where_terms_do_not_cancel(tmp_path):
+    """Delta = 0.1 sin(x2)^2 (not shared): the interval bound on the box is >= the true sup of
+    |d^2 Delta / dx2^2| = 0.2 |cos(2 x2)| (= 0.2 at x2 = 0), within interval overestimation."""
+    from drip_cert.analysis.policy_regularity import difference_jacobian_lipschitz
+
+    s, _ = _system(tmp_path, "-x1 - 2*x2", 'learned = ["-x1 - 2*x2 + 0.1*sin(x2)**2"]')
+    d = difference_jacobian_lipschitz(s, BOX)
+    assert d is not None and d.how == How.SOUND and not d.scope.all_x
+    assert 0.2 <= d.value <= 0.2 * 2  # an interval enclosure of cos(2 x2) on [-2, 2] in [-1, 1]
+    assert difference_jacobian_lipschitz(s, None) is None  # no box, no blocks: no sound route

@@ -61,6 +61,12 @@ def test_reproduce_paper_4d_quick(tmp_path, monkeypatch, capsys):
         pytest.param("unmatched_2d", marks=pytest.mark.slow),
         pytest.param("nonlinear_2d", marks=pytest.mark.slow),
         "infeasible_2d",
+        # the natural-coordinate examples: certified in z = Theta x and validated in x at the
+        # certified L1-DRAC parameters; one in the quick suite (the certificates of all three
+        # are checked quickly in test_coordinates.py, and the pendulum's validation too)
+        "van_der_pol",
+        pytest.param("pendulum", marks=pytest.mark.slow),
+        pytest.param("cart_pole", marks=pytest.mark.slow),
     ],
 )
 def test_gallery_quick_run(name, tmp_path):
@@ -71,6 +77,9 @@ def test_gallery_quick_run(name, tmp_path):
         assert summary["certified"] is False and "L1DRAC-A7" in summary["failing"]
     if name == "nonlinear_2d":
         assert "DRIP-A2" not in summary["failing"]
+    if name in ("van_der_pol", "pendulum", "cart_pole"):
+        assert summary["certified"] is True, summary["failing"]
+        assert summary["validation_status"] == "holds" and summary["validation_holds"]
 
 
 def test_train_command_writes_policy(tmp_path, capsys):

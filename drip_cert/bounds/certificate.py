@@ -446,8 +446,9 @@ def certify(
     (the default) the certificate is computed in the spec's coordinates ``x`` and, when an LMI
     contraction metric ``P`` of the expert closed loop is found and the Euclidean rate fails or
     is slower than the metric rate, also for the equivalent system in ``z = Theta x``
-    (``P = Theta^T Theta``); the better one is returned (verdict first, then the smaller ``rho``
-    in ``x``; a tie keeps ``x``), the other summarised under ``coordinates.alternatives``.
+    (``P = Theta^T Theta``); the better one is returned (verdict first, then fewer failing
+    checks, then the smaller finite radii in ``x``; a tie keeps ``x``), the other summarised
+    under ``coordinates.alternatives``.
     ``"lmi"`` always uses the metric when one is found, a given matrix ``P`` uses that metric,
     ``"euclidean"`` never changes coordinates.
     """
@@ -516,12 +517,14 @@ larger): the candidates of the rate / condition-number trade-off of the coordina
 _VERDICT_ORDER = {Verdict.CERTIFIED: 0, Verdict.CONDITIONAL: 1, Verdict.NOT_CERTIFIED: 2}
 
 
-def _preference(c: Certificate) -> tuple[int, float]:
-    """Better verdict first, then the smaller radius in x: the sum of the radii that exist
-    (``rho``, or the one part computed), inf when none is finite."""
-    parts = [v for v in (c.rho_tasil, c.rho_l1) if v is not None]
+def _preference(c: Certificate) -> tuple[int, int, float]:
+    """Better verdict first, then fewer checks that fail (or could not be evaluated), then the
+    smaller radius in x: the sum of the finite radii that exist (``rho_TaSIL``, ``rho_L1``), inf
+    when none is finite."""
+    failing = sum(1 for a in c.assumptions if not a.holds)
+    parts = [v for v in (c.rho_tasil, c.rho_l1) if v is not None and math.isfinite(v)]
     rho = up(sum(parts)) if parts else math.inf
-    return _VERDICT_ORDER[c.verdict], rho if math.isfinite(rho) else math.inf
+    return _VERDICT_ORDER[c.verdict], failing, rho
 
 
 def _summary(c: Certificate) -> dict[str, Any]:
@@ -720,13 +723,17 @@ def _certify_in(spec: Spec, demonstrations: DemonstrationSet | None, stage: Stag
         extra_q.extend(q for q in tq if q.name != "gamma0")
     if tasil is not None:
         ok = tasil.rho is not None and math.isfinite(tasil.rho)
+        # why rho is infinite: the lemma's failure, else the failing form's own reason
+        why = tasil.gap_reason or next(
+            (f"{f.name}: {f.note}" for f in tasil.forms if f.name == tasil.rho_form), ""
+        )
         tcheck = Check.derive(
             "TaSIL",
             ok,
             "rho_TaSIL = "
             + (f"{tasil.rho:.6g}" if ok else "inf")
             + f" ({tasil.rho_form}); deterministic gap bound over the given initial "
-            f"states {tasil.gap_bound:.6g}" + ("" if ok else f"; {tasil.gap_reason}"),
+            f"states {tasil.gap_bound:.6g}" + ("" if ok or not why else f"; {why}"),
             inputs=[*extra_q, lam_ex],
             method=How.SOUND,
             lhs=float(tasil.rho) if ok else math.inf,

@@ -54,6 +54,7 @@ __all__ = [
     "clopper_pearson_lower",
     "clopper_pearson_upper",
     "finalize",
+    "map_sequential",
     "new_sums",
     "norms_sequential",
     "t_interval",
@@ -112,6 +113,24 @@ def new_sums(n_times: int, p_max: int, kappas: tuple[float, ...] = ()) -> GapSum
         max=np.full(n_times, -np.inf),
         path_max=np.zeros(0),
     )
+
+
+def map_sequential(diff: np.ndarray, M: np.ndarray) -> np.ndarray:
+    """``diff @ M.T`` over the last axis, each entry summed left to right.
+
+    Like :func:`norms_sequential`, each output row depends on its own input row only (a BLAS
+    product may change its summation order with the array's shape), which the chunk-size
+    invariance of the Monte-Carlo accumulators needs.
+    """
+    diff = np.asarray(diff, dtype=np.float64)
+    M = np.asarray(M, dtype=np.float64)
+    out = np.empty(diff.shape[:-1] + (M.shape[0],), dtype=np.float64)
+    for i in range(M.shape[0]):
+        acc = diff[..., 0] * M[i, 0]
+        for c in range(1, diff.shape[-1]):
+            acc = acc + diff[..., c] * M[i, c]
+        out[..., i] = acc
+    return out
 
 
 def norms_sequential(diff: np.ndarray) -> np.ndarray:

@@ -74,9 +74,13 @@ def absorb(state: RunState, cfg: SimConfig, idx: np.ndarray, recs, codes) -> Run
     real = idx < cfg.n_paths
     ok = (codes == STATUS_OK) & real[None, :]
     sums = []
+    M = None if cfg.gap_readout is None else np.array(cfg.gap_readout)
     for (_, a, b), gs in zip(cfg.gaps, state.sums):
         ia, ib = cfg.scenarios.index(a), cfg.scenarios.index(b)
-        r = _stats.norms_sequential(recs[:, ia] - recs[:, ib]).T  # (B, n_rec)
+        diff = recs[:, ia] - recs[:, ib]  # (n_rec, B, n)
+        if M is not None:
+            diff = _stats.map_sequential(diff, M)  # the gap in the readout's coordinates
+        r = _stats.norms_sequential(diff).T  # (B, n_rec)
         sums.append(_stats.accumulate(gs, r, ok[ia] & ok[ib]))
     samples = state.samples.copy()
     sample_status = state.sample_status.copy()

@@ -76,6 +76,11 @@ class SimConfig:
         Confidence level of the t intervals and of the Clopper-Pearson bounds.
     divergence_cap
         A path whose state norm exceeds this is frozen and excluded.
+    gap_readout
+        ``None``, or an invertible ``n x n`` matrix ``M`` (nested tuples): the gap statistics
+        are then of ``||M (a - b)||`` instead of ``||a - b||`` (a system simulated in
+        ``z = Theta x`` with ``M = Theta^{-1}`` gives the gaps in the user's ``x``); recorded
+        trajectories and W2 clouds stay in the simulated coordinates.
     """
 
     T: float
@@ -93,8 +98,22 @@ class SimConfig:
     w2_points: int = 2000
     ci_level: float = 0.95
     divergence_cap: float = 1e6
+    gap_readout: tuple[tuple[float, ...], ...] | None = None
 
     def __post_init__(self) -> None:
+        if self.gap_readout is not None:
+            M = np.array(self.gap_readout, dtype=np.float64)
+            if (
+                M.ndim != 2
+                or M.shape[0] != M.shape[1]
+                or not np.all(np.isfinite(M))
+                or np.linalg.matrix_rank(M) < M.shape[0]
+            ):
+                raise SpecError(
+                    f"gap_readout must be a finite invertible square matrix, got {M.tolist()}",
+                    field="SimConfig.gap_readout",
+                )
+            object.__setattr__(self, "gap_readout", tuple(tuple(map(float, r)) for r in M))
         for fld in ("T", "dt", "divergence_cap"):
             v = float(getattr(self, fld))
             if not (math.isfinite(v) and v > 0):
@@ -211,4 +230,8 @@ class SimConfig:
         out["scenarios"] = list(self.scenarios)
         out["kappas"] = list(self.kappas)
         out["w2_times"] = list(self.w2_times)
+        if self.gap_readout is None:
+            del out["gap_readout"]  # the resume hash of runs without one is unchanged
+        else:
+            out["gap_readout"] = [list(r) for r in self.gap_readout]
         return out

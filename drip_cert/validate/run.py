@@ -171,9 +171,11 @@ def validate(
         x0_box, theta = s.support, coords.theta
         s = cert.system
         notes.append(
-            "validated in the certificate's coordinates z = Theta x: every empirical gap and "
-            "bound below is in z; in x the gaps are at most factor_to_x = "
-            f"{coords.to_x:.6g} times these (Proposition 5.3 of docs/math/contraction.md)"
+            "simulated in the certificate's coordinates z = Theta x (the same law: the initial "
+            "law pushed forward by Theta) and validated in the user's x: every gap is of "
+            "x = Theta^{-1} z, compared with the bounds mapped back to x (factor_to_x = "
+            f"{coords.to_x:.6g}, Proposition 5.3 of docs/math/contraction.md; tail thresholds "
+            "kappa scaled by the same factor)"
         )
     design = cert.l1.design if (cert.l1 is not None and cert.l1.feasible) else None
     at_cert = False
@@ -202,11 +204,14 @@ def validate(
                 "no feasible L1-DRAC design is certified: the L1 run uses practical "
                 "parameters and no uncertainty bound is checked"
             )
-    rho_tasil = cert.rho_tasil_native
+    # the bounds in the user's x (mapped back when the certificate is in z): the gaps are too
+    rho_tasil = cert.rho_tasil
     delta_tasil = cert.tasil.delta if cert.tasil is not None else None
-    rho_l1 = cert.rho_l1_native
+    rho_l1 = cert.rho_l1
     p = design.p if design is not None else 1
     kappa = design.kappa if design is not None else None
+    if kappa is not None and coords is not None:
+        kappa = coords.gap_in_x(kappa)  # P(||x gap|| >= F kappa) <= P(||z gap|| >= kappa)
     delta_l1 = design.delta if design is not None else None
     why = "no feasible L1-DRAC design" if design is None else "practical T_s, see the notes"
     kappas = _thresholds(kappa, rho_tasil)

@@ -61,7 +61,8 @@ def run_scenarios(
     """Simulate the four scenarios of the DRIP paper for ``s`` (with its learned policy).
 
     Initial states are uniform on ``x0_box`` (default ``s.support``), mapped by ``theta`` when
-    ``s`` is a system in coordinates ``z = theta x``."""
+    ``s`` is a system in coordinates ``z = theta x``; the gap statistics are then those of the
+    user's ``x = theta^{-1} z`` (:attr:`~drip_cert.sim.config.SimConfig.gap_readout`)."""
     from drip_cert.sim.config import SimConfig  # jax: keep off the API's import path
     from drip_cert.sim.engine import simulate  # jax: keep off the API's import path
 
@@ -77,6 +78,7 @@ def run_scenarios(
         p_max=p_max,
         w2_times=w2_times,
         w2_points=min(2000, max(2, paths // 2)),
+        gap_readout=None if theta is None else tuple(map(tuple, np.linalg.inv(theta))),
     )
     box = s.support if x0_box is None else x0_box
     return simulate(s.numeric, cfg, x0_sampler(box, theta), run_dir=run_dir, progress=progress)

@@ -12,7 +12,10 @@ from typing import Any
 import numpy as np
 
 from drip_cert._jax import jax, jnp
-from drip_cert.analysis.policy_regularity import jacobian_lipschitz
+from drip_cert.analysis.policy_regularity import (
+    difference_jacobian_lipschitz,
+    jacobian_lipschitz,
+)
 from drip_cert.bounds.tasil.certificate import TasilCertificate, tasil_certificate
 from drip_cert.bounds.tasil.forms import FORMS, TasilForm
 from drip_cert.bounds.tasil.trajectory import TrajectoryH, h_continuous
@@ -109,7 +112,10 @@ def tasil_section(
     -------
     (TasilCertificate, provenance dict, quantities)
         ``quantities`` are the inputs the TaSIL check rests on (``L_dpi_*``, ``h0``, ``h1``), each
-        with its computed label. ``L_Delta = L_dpi(pi_IL) + L_dpi(pi*)`` (triangle inequality).
+        with its computed label. ``L_Delta`` is the smaller of the triangle bound
+        ``L_dpi(pi_IL) + L_dpi(pi*)`` and a bound on the difference ``pi_IL - pi*`` itself
+        (:func:`~drip_cert.analysis.policy_regularity.difference_jacobian_lipschitz`; used only
+        when it is not an estimate).
     """
     # the tube of assumption A2: the box around all expert states, enlarged by the tube radius
     # (1 when no finite radius is set); region-limited bounds then cap R at that radius
@@ -118,29 +124,47 @@ def tasil_section(
     box = np.stack([pts.min(axis=0) - margin, pts.max(axis=0) + margin], axis=1)
     L_il = jacobian_lipschitz(s, "learned", box)
     L_ex = jacobian_lipschitz(s, "expert", box)
+    L_tri = Quantity.derive(
+        "L_Delta",
+        add_up(L_il.value, L_ex.value),
+        inputs=[L_il, L_ex],
+        source="DRIP Assumption PolicyRegularity (b)",
+        note="L_dpi(pi_IL) + L_dpi(pi*) (triangle inequality)",
+    )
+    # the difference itself: terms both policies share cancel (never worse when it is a bound)
+    L_dir = difference_jacobian_lipschitz(s, box)
+    direct = L_dir is not None and L_dir.value < L_tri.value
+    L_Delta = (
+        Quantity.derive(
+            "L_Delta",
+            L_dir.value,
+            inputs=[L_dir],
+            source="DRIP Assumption PolicyRegularity (b)",
+            note="Lipschitz constant of d(pi_IL - pi*) bounded on the difference itself ("
+            + L_dir.note
+            + f"); the triangle bound L_dpi(pi_IL) + L_dpi(pi*) is {L_tri.value:.6g}",
+        )
+        if L_dir is not None and direct
+        else L_tri
+    )
     R = settings.tube_radius
-    if not (L_il.scope.all_x and L_ex.scope.all_x):
+    if not L_Delta.scope.all_x:
         R = min(R, margin)
     if math.isfinite(room) and room > 0.0:
         # strictly below the room (the first-exit argument needs gap < room); with no room at
         # all (the invariant set fills the region) R is left as it is and the certificate marks
         # the TaSIL scope unjustified (bounds/certificate.py, _tasil_scope)
         R = min(R, math.nextafter(room, 0.0))
-    L_Delta = Quantity.derive(
-        "L_Delta",
-        add_up(L_il.value, L_ex.value),
-        inputs=[L_il, L_ex],
-        source="DRIP Assumption PolicyRegularity (b)",
-        note="L_dpi(pi_IL) + L_dpi(pi*)",
-    )
     provenance: dict[str, Any] = {
         "L_dpi_learned": L_il.to_dict(),
         "L_dpi_expert": L_ex.to_dict(),
+        "L_dDelta": None if L_dir is None else L_dir.to_dict(),
+        "L_Delta_route": "difference" if direct else "triangle",
         "gamma0": gamma0.to_dict(),
         "tube_radius_R": R,
         "room": room,
     }
-    qs: list[Quantity] = [gamma0, L_il, L_ex]
+    qs: list[Quantity] = [gamma0, L_il, L_ex] + ([L_dir] if L_dir is not None and direct else [])
     if not math.isfinite(L_Delta.value):
         return (
             _not_lipschitz(
