@@ -234,9 +234,7 @@ def test_natural_coordinate_examples_are_certified_through_the_metric(name):
     }
     assert cert.l1.design.Ts >= SIMULABLE_TS
     # chosen by the final radius: no certified alternative has a smaller rho_TaSIL + rho_L1 in x
-    others = [
-        a["rho_tasil_x"] + a["rho_l1_x"] for a in alts if a["verdict"] == "certified"
-    ]
+    others = [a["rho_tasil_x"] + a["rho_l1_x"] for a in alts if a["verdict"] == "certified"]
     assert all(cert.rho_tasil + cert.rho_l1 <= r for r in others)
     from drip_cert.numerics.rounding import mul_up
 
@@ -252,14 +250,19 @@ SIMULABLE_TS = 1e-3
 def test_fewer_failing_checks_win_when_no_coordinates_certify(tmp_path):
     """Pendulum with a learned policy whose gains are 10 % off: in x DRIP Assumption 2 fails
     (no contraction at all); in z contraction and L1-DRAC hold and only TaSIL fails (the
-    lemma's conditions on the policy error). Both are not_certified; the z certificate, which proves more, is the one returned."""
+    lemma's conditions on the policy error). Both are not_certified; the z certificate, which
+    proves more, is the one returned."""
     from drip_cert.bounds.certificate import certify
     from drip_cert.spec import load_spec
     from tests.helpers import example_spec
 
-    text = example_spec("pendulum").read_text().replace(
-        "learned = [\"9.81*sin(q) - 3.96*q - 4.04*q_dot\"]",
-        "learned = [\"9.81*sin(q) - 3.6*q - 4.4*q_dot\"]",
+    text = (
+        example_spec("pendulum")
+        .read_text()
+        .replace(
+            'learned = ["9.81*sin(q) - 3.96*q - 4.04*q_dot"]',
+            'learned = ["9.81*sin(q) - 3.6*q - 4.4*q_dot"]',
+        )
     )
     assert "3.6*q" in text
     path = tmp_path / "pendulum.toml"

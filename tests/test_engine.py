@@ -221,9 +221,7 @@ def test_gap_readout_maps_the_gaps_and_keeps_the_paths(base_result, model):
     paths are untouched; a rotation leaves the norms unchanged up to rounding; and the result
     is still bit-for-bit independent of the chunk size."""
     two = tuple(tuple(2.0 * float(i == j) for j in range(3)) for i in range(3))
-    res = simulate(
-        model, dataclasses.replace(_CFG, gap_readout=two), _x0, _x0_bar, progress=False
-    )
+    res = simulate(model, dataclasses.replace(_CFG, gap_readout=two), _x0, _x0_bar, progress=False)
     assert np.array_equal(res.sample_paths, base_result.sample_paths, equal_nan=True)
     for g, g0 in zip(res.gaps, base_result.gaps):
         assert np.array_equal(g.mean, 2.0 * g0.mean)
@@ -235,9 +233,7 @@ def test_gap_readout_maps_the_gaps_and_keeps_the_paths(base_result, model):
     for g, g0 in zip(r1.gaps, base_result.gaps):
         # the rotation rounds each component too: ten times the norm tolerance
         np.testing.assert_allclose(g.mean, g0.mean, rtol=NORM_RTOL * 10, atol=POINT_MASS_ATOL)
-    r2 = simulate(
-        model, dataclasses.replace(cfg, chunk_size=7), _x0, _x0_bar, progress=False
-    )
+    r2 = simulate(model, dataclasses.replace(cfg, chunk_size=7), _x0, _x0_bar, progress=False)
     _assert_bitwise(r1, r2)
     with pytest.raises(SpecError, match="gap_readout"):
         dataclasses.replace(_CFG, gap_readout=((1.0, 0.0, 0.0),) * 3)  # singular
