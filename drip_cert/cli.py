@@ -31,13 +31,15 @@ def cmd_check_spec(args: argparse.Namespace) -> int:
     spec = load_spec(args.spec)
     s = spec.system
     if args.json:
-        _print_json({"ok": True, "system": s.to_dict()})
+        _print_json({"ok": True, "system": s.to_dict(), "notes": list(spec.notes)})
     else:
         print(
             f"{args.spec}: OK — system '{s.name}', n = {s.n}, m = {s.m}, d = {s.d}, "
             f"T = {s.horizon:g}, blocks: {', '.join(s.blocks) or 'none'}, learned policy: "
             f"{'yes' if s.learned is not None else 'no'}"
         )
+        for note in spec.notes:
+            print(f"  {note}")
     return 0
 
 

@@ -288,3 +288,20 @@ def test_the_three_natural_coordinate_examples_load():
     B = np.array([[0.0], [0.0], [1.0], [-2.0]])
     K = _scipy_lqr(A, B, np.diag([1.0, 10.0, 1.0, 1.0]), np.array([[0.1]]))
     assert np.array_equal(gain.K_float, K)
+
+
+def test_check_spec_and_certify_report_where_the_lqr_gain_came_from(capsys):
+    """The gain of an ``expert = "lqr"`` spec is printed by check-spec (text and JSON) and kept
+    among the certificate's notes (also when the certificate is computed in z = Theta x)."""
+    import json
+
+    from drip_cert.bounds.certificate import certify
+
+    path = example_spec("cart_pole")
+    code, out, _ = run_cli(capsys, "check-spec", str(path))
+    assert code == 0 and "from LQR (scipy.linalg.solve_continuous_are)" in out
+    code, out, _ = run_cli(capsys, "check-spec", str(path), "--json")
+    assert code == 0 and "closed-loop eigenvalues" in json.loads(out)["notes"][0]
+    cert = certify(load_spec(path))
+    assert cert.coordinates is not None
+    assert any("from LQR" in n for n in cert.notes)

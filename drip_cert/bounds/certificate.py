@@ -550,7 +550,7 @@ def _certify_in_metric(
     ctab["metric"] = "euclidean"
     if "region" in ctab:
         ctab["region"] = [list(b) for b in box_image(Th, ctab["region"])]
-    zspec = Spec(spec.path, zsys, tables)
+    zspec = Spec(spec.path, zsys, tables, expert_gain=spec.expert_gain)  # its note is about x
     demos = demonstrations
     wants = spec.system.learned is not None and (
         "tasil" in spec.settings.present or demonstrations is not None
@@ -595,7 +595,7 @@ def _certify_in(spec: Spec, demonstrations: DemonstrationSet | None, stage: Stag
     stage("input and uncertainty constants (growth, Lipschitz, Hoelder bounds)")
     ic = input_constants(s)
     uc = uncertainty_constants(s, given)
-    notes: list[str] = []
+    notes: list[str] = list(spec.notes)  # how the spec defined the system (a K / LQR expert)
     checks: list[Check] = []
     extra_q: list[Quantity] = []
     wants_l1 = "l1drac" in settings.present
