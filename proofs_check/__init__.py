@@ -17,6 +17,7 @@ MODULES = (
     "proofs_check.decomposition",
     "proofs_check.tasil_gap",
     "proofs_check.tasil_rates",
+    "proofs_check.tasil_comparison",
     "proofs_check.l1drac_probability",
     "proofs_check.l1drac_adaptation",
     "proofs_check.l1drac_maps",

@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import itertools
+import math
 
 import numpy as np
 import pytest
@@ -293,3 +294,29 @@ def test_validate_confirms_the_mapped_back_bounds_at_the_certified_parameters():
     assert by["policy_radius"].status == "holds" and by["uncertainty_L2_norm"].status == "holds"
     assert rep.result.config.gap_readout is not None
     assert any("validated in the user's x" in n for n in rep.notes)
+
+
+def test_the_comparison_route_bounds_the_gap_where_the_lemma_fails(tmp_path):
+    """Cart-pole with the LQR gain 1 % off: the TaSIL lemma's gap bound exceeds the tube radius
+    (its condition fails), but the learned loop contracts on all of R^n (exact, in z), so the
+    comparison bound ||g_z||_2 h0 / lambda_IL (docs/math/tasil.md Proposition 3.7) gives a
+    finite deterministic gap bound; that gain is among the TaSIL check's inputs (sound)."""
+    from drip_cert.bounds.certificate import certify
+    from drip_cert.spec import load_spec
+    from tests.helpers import example_spec
+
+    text = example_spec("cart_pole").read_text()
+    old = 'learned = ["3.17*x + 46.13*theta + 5.71*x_dot + 10.38*theta_dot"]'
+    assert old in text
+    path = tmp_path / "cart_pole.toml"
+    path.write_text(
+        text.replace(old, 'learned = ["3.13*x + 46.49*theta + 5.78*x_dot + 10.3*theta_dot"]')
+    )
+    cert = certify(load_spec(path))
+    t = cert.tasil
+    assert cert.coordinates is not None and t.gap_route == "comparison"
+    lemma_fails = any(not c.holds for c in t.gap_checks)
+    assert lemma_fails and math.isfinite(t.gap_bound)
+    assert t.gap_bound >= t.comparison_gain * t.h0  # rounded up, never down
+    gain = next(q for q in cert.all_quantities() if q.name == "gamma_IL")
+    assert gain.value == t.comparison_gain and gain.how.value in ("exact", "sound")

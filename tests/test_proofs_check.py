@@ -124,3 +124,14 @@ def test_coordinate_mapping_check_fails_on_a_wrong_factor():
     ctx = _ctx("coordinates.delta_iss_maps_back")
     res = check_delta_iss_maps_back(ctx, factor=0.99)
     assert res.verdict is Verdict.FAIL and res.residual > 0
+
+
+def test_comparison_bound_check_holds_and_fails_on_a_smaller_bound():
+    """Proposition 3.7 (the TaSIL comparison route): holds, is attained on the tight instances,
+    and fails when the bound is taken 0.99 times too small."""
+    from proofs_check.tasil_comparison import check_comparison_bound
+
+    ok = check_comparison_bound(_ctx("tasil.comparison_bound"))
+    assert ok.verdict is Verdict.PASS and ok.residual > -1e-6  # attained: the ratio reaches 1
+    res = check_comparison_bound(_ctx("tasil.comparison_bound"), factor=0.99)
+    assert res.verdict is Verdict.FAIL and res.residual > 0

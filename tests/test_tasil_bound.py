@@ -404,3 +404,41 @@ def test_held_out_radius_covers_fresh_dummy2_states():
     assert cert.certified, cert.form("held_out").note
     _, _, gap = run(1000)
     assert np.mean(gap > cert.rho) <= delta
+
+
+def test_comparison_route_when_the_lemma_fails():
+    """gamma0 h1 = 2 > 1: the lemma fails for every state. With the learned loop's comparison gain
+    c = 3 (docs/math/tasil.md Proposition 3.7) the deterministic bound is c max h0 and the held-out
+    radius c tau0 (both rounded up, within one closed-form pad of the exact products)."""
+    from drip_cert.bounds.tasil._common import up_closed_form
+
+    rng = np.random.default_rng(3)
+    h0 = rng.uniform(0.01, 0.02, size=20)
+    h1 = np.full(20, 0.4)
+    hv0 = rng.uniform(0.01, 0.02, size=100) * 0.5  # fresh states below the training maxima
+    hv1 = np.full(100, 0.3)
+    kw = dict(gamma0=5.0, L_Delta=1.0, delta=0.1, heldout_h0=hv0, heldout_h1=hv1)
+    plain = tasil_certificate(h0, h1, **kw)
+    assert math.isinf(plain.gap_bound) and math.isinf(plain.rho) and plain.gap_route == "lemma"
+    cert = tasil_certificate(h0, h1, comparison_gain=3.0, **kw)
+    assert cert.gap_route == "comparison" and cert.gap_reason == ""
+    assert cert.gap_bound == up_closed_form(3.0 * h0.max()) >= 3.0 * h0.max()
+    assert cert.rho == up_closed_form(3.0 * cert.tau0) and cert.certified
+    form = cert.form("held_out")
+    assert [c.id for c in form.checks] == ["tasil.held_out.level", "tasil.comparison"]
+    assert cert.to_dict()["comparison_gain"] == 3.0
+
+
+def test_comparison_route_is_not_taken_when_the_lemma_is_smaller():
+    """A tiny h1 and L = 0: the lemma's gamma0 eps* ~ gamma0 h0 is below c h0 with c = 10 gamma0."""
+    h0 = np.full(10, 0.01)
+    h1 = np.full(10, 1e-4)
+    cert = tasil_certificate(
+        h0, h1, gamma0=2.0, L_Delta=0.0, delta=0.1, heldout_h0=h0[:5] * 0, heldout_h1=h1[:5] * 0,
+        comparison_gain=20.0,
+    )  # fmt: skip
+    lemma = tasil_certificate(
+        h0, h1, gamma0=2.0, L_Delta=0.0, delta=0.1, heldout_h0=h0[:5] * 0, heldout_h1=h1[:5] * 0
+    )
+    assert cert.gap_route == "lemma" and cert.gap_bound == lemma.gap_bound
+    assert cert.form("held_out").value == lemma.form("held_out").value

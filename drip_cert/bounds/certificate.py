@@ -710,6 +710,18 @@ def _certify_in(spec: Spec, demonstrations: DemonstrationSet | None, stage: Stag
         demos = demonstration_set(s, st) if demonstrations is None else demonstrations
         train, held = demos.train, demos.heldout
         room = math.inf if inv is None else (inv.room if inv.proved else math.inf)
+        # the comparison bound needs the learned loop to contract on all of R^n, proved
+        cmp_gain = None
+        if cl is not None and cl.euclidean.holds and cl.euclidean.scope.all_x:
+            lam_il = cl.euclidean.to_quantity()
+            if lam_il.how != How.ESTIMATE and lam_il.value > 0:
+                cmp_gain = Quantity.derive(
+                    "gamma_IL",
+                    div_up(ic.Delta_g_spectral.value, lam_il.value),
+                    inputs=[ic.Delta_g_spectral, lam_il.renamed("lambda_learned")],
+                    source="comparison bound of the learned loop (docs/math/tasil.md section 3.7)",
+                    note="sup||g||_2 / lambda_IL, rounded up",
+                )
         tasil, tasil_prov, tq = tasil_section(
             s,
             train,
@@ -719,6 +731,7 @@ def _certify_in(spec: Spec, demonstrations: DemonstrationSet | None, stage: Stag
             room=room,
             speed_sound=r.scope.all_x or (inv is not None and inv.proved),
             method=f"{st.method}-{st.order}",
+            comparison_gain=cmp_gain,
         )
         extra_q.extend(q for q in tq if q.name != "gamma0")
     if tasil is not None:

@@ -12,16 +12,16 @@ from drip_cert.numerics.rounding import add_up, mul_up
 from drip_cert.provenance import Check, How
 
 _EPS = float(np.finfo(np.float64).eps)
-# Relative upward pad of the closed forms that :func:`up_closed_form` rounds (a pad that stays,
-# with its proof). Each closed form it is applied to (parametric_epsilon, parametric_expectation,
-# rho_tasil, the gap bounds 2 gamma0 h0 and gamma0 eps*, the cone peaks of the continuous-time
-# sups) is a sum of NON-NEGATIVE terms (no cancellation) built with at most 15 correctly rounded
-# operations (each relative error <= u = EPS/2) and at most 3 library logarithms log / log1p (each
-# within LIBM_ULPS = 8 EPS of drip_cert.numerics.rounding); a relative error e of the argument of
-# log(y), y >= 2, or of log1p(x) gives a relative error <= e / log 2 of the result
-# (log(1+x) >= x/(1+x)), so the total relative error is below 15 u + 3 (8 + 1.5) EPS < 36 EPS;
-# 64 EPS leaves a margin of 1.7. (eps_star and the Clopper-Pearson bound do not use it: they are
-# bounded by directed rounding and verified in Arb respectively.)
+# Relative upward pad of the closed forms that :func:`up_closed_form` rounds (a pad that stays, with
+# its proof). Each closed form it is applied to (parametric_epsilon, parametric_expectation,
+# rho_tasil, the gap bounds 2 gamma0 h0, gamma0 eps* and the comparison bound c h0, the cone peaks
+# of the continuous-time sups) is a sum of NON-NEGATIVE terms (no cancellation) built with at most
+# 15 correctly rounded operations (each relative error <= u = EPS/2) and at most 3 library
+# logarithms log / log1p (each within LIBM_ULPS = 8 EPS of drip_cert.numerics.rounding); a relative
+# error e of the argument of log(y), y >= 2, or of log1p(x) gives a relative error <= e / log 2 of
+# the result (log(1+x) >= x/(1+x)), so the total relative error is below 15 u + 3 (8 + 1.5) EPS < 36
+# EPS; 64 EPS leaves a margin of 1.7. (eps_star and the Clopper-Pearson bound do not use it: they
+# are bounded by directed rounding and verified in Arb respectively.)
 REL_PAD = 64.0 * _EPS
 
 

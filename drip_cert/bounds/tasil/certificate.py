@@ -31,7 +31,7 @@ from typing import Any
 
 import numpy as np
 
-from drip_cert.bounds.tasil._common import positive, probability
+from drip_cert.bounds.tasil._common import positive, probability, up_closed_form
 from drip_cert.bounds.tasil.forms import (
     ClassConstants,
     TasilForm,
@@ -87,6 +87,11 @@ class TasilCertificate:
         Whether h's are continuous-time sups (section 4).
     gap_checks
         The lemma's conditions at the worst given initial state.
+    comparison_gain, gap_route
+        ``sup||g||_2 / lambda_IL`` when the learned closed loop is proved to contract on all of
+        ``R^n`` (the comparison bound ``gap <= comparison_gain * h_0``, docs/math/tasil.md
+        section 3.7), else ``None``; ``gap_route`` says which bound gave ``gap_bound``
+        (``"lemma"`` or ``"comparison"``).
     label, assumptions
         :data:`LABEL` and :data:`ASSUMPTIONS`.
     """
@@ -111,6 +116,8 @@ class TasilCertificate:
     vacuous_forms: tuple[str, ...]
     continuous: bool = False
     gap_checks: tuple[Check, ...] = ()
+    comparison_gain: float | None = None
+    gap_route: str = "lemma"
     label: str = LABEL
     assumptions: tuple[str, ...] = field(default=ASSUMPTIONS)
 
@@ -151,6 +158,10 @@ class TasilCertificate:
             "continuous": self.continuous,
             "forms": [f.to_dict() for f in self.forms],
             "gap_checks": [c.to_dict() for c in self.gap_checks],
+            "comparison_gain": None
+            if self.comparison_gain is None
+            else json_float(self.comparison_gain),
+            "gap_route": self.gap_route,
             "assumptions": list(self.assumptions),
         }
 
@@ -190,6 +201,7 @@ def tasil_certificate(
     use: str | None = None,
     method: str = "tasil-1",
     continuous: bool = False,
+    comparison_gain: float | None = None,
 ) -> TasilCertificate:
     """Build the TaSIL certificate (docs/math/tasil.md sections 3-4; DRIP Theorem ``thm:TaSIL``
     shape).
@@ -221,6 +233,11 @@ def tasil_certificate(
         Name of the training method, recorded.
     continuous
         The h's are continuous-time sups (section 4).
+    comparison_gain
+        An upper bound on ``sup||g||_2 / lambda_IL``, given only when the learned closed loop is
+        proved to contract at ``lambda_IL`` on all of ``R^n``: then every gap also obeys the
+        comparison bound ``gap <= comparison_gain * h_0`` (docs/math/tasil.md section 3.7), with
+        no condition on ``h_1``, ``L_Delta`` or the tube; the smaller bound is used.
 
     Returns
     -------
@@ -265,6 +282,7 @@ def tasil_certificate(
             field="constants",
         )
     n, n_val = int(h0t.size), int(h0v.size)
+    cg = None if comparison_gain is None else positive("comparison_gain", comparison_gain)
 
     # deterministic lemma per given initial state
     all0, all1 = np.concatenate([h0t, h0v]), np.concatenate([h1t, h1v])
@@ -276,12 +294,17 @@ def tasil_certificate(
         n_fail = sum(
             not imitation_gap_lemma(a, b, gamma0, L, eta, R).holds for a, b in zip(all0, all1)
         )
-    gap_bound = lem.bound
+    gap_bound, route = lem.bound, "lemma"
+    if cg is not None:
+        # every state's gap <= cg h0_i <= cg max h0 (section 3.7): valid whatever the lemma says
+        gap_cmp = up_closed_form(cg * float(all0.max()))
+        if gap_cmp < gap_bound:
+            gap_bound, route = gap_cmp, "comparison"
     where = "training" if worst < n else "held-out"
     idx = worst if worst < n else worst - n
     gap_reason = (
         ""
-        if lem.holds
+        if math.isfinite(gap_bound)
         else f"lemma fails on {n_fail} of {all0.size} states; worst: {where} #{idx}: {lem.reason}"
     )
 
@@ -294,7 +317,7 @@ def tasil_certificate(
         tau0, tau1 = obs if have_val else (math.nan, math.nan)
     forms: list[TasilForm] = []
     if have_val:
-        forms.append(form_held_out(h0v, h1v, tau0, tau1, gamma0, L, eta, R, delta, continuous))
+        forms.append(form_held_out(h0v, h1v, tau0, tau1, gamma0, L, eta, R, delta, continuous, cg))
     else:
         forms.append(TasilForm("held_out", math.inf, False, True, "not computed: no held-out data"))
     if constants is not None:
@@ -329,4 +352,6 @@ def tasil_certificate(
         vacuous_forms=vac,
         continuous=continuous,
         gap_checks=lem.checks,
+        comparison_gain=cg,
+        gap_route=route,
     )

@@ -256,10 +256,15 @@ def _theta_check(c: ClassConstants) -> list[Check]:
     ]
 
 
-def form_held_out(h0v, h1v, tau0, tau1, gamma0, L, eta, R, delta, cont) -> TasilForm:
+def form_held_out(
+    h0v, h1v, tau0, tau1, gamma0, L, eta, R, delta, cont, comparison_gain=None
+) -> TasilForm:
     """The held-out form (docs/math/tasil.md 3.3 c, 3.4): ``k`` of the held-out h's exceed
     ``tau``; the sound Clopper-Pearson bound at confidence ``1 - delta/2`` must be
-    ``<= delta/2``, and the sharp lemma at ``tau`` gives the radius."""
+    ``<= delta/2``, and the sharp lemma at ``tau`` gives the radius. With a
+    ``comparison_gain`` (a learned loop contracting on all of ``R^n``, docs/math/tasil.md
+    Proposition 3.7) the radius is the smaller of that and ``comparison_gain * tau0``: on the
+    event ``h0 <= tau0`` (which contains the event the level bounds) that bound holds too."""
     n_val = h0v.size
     k = int(np.sum((h0v > tau0) | (h1v > tau1)))
     eps = float(clopper_pearson_upper(k, n_val, alpha=delta / 2.0, sound=True))
@@ -274,16 +279,34 @@ def form_held_out(h0v, h1v, tau0, tau1, gamma0, L, eta, R, delta, cont) -> Tasil
         "docs/math/tasil.md 3.3 (c)",
         How.SOUND,
     )
-    checks = (level, *lem.sharp_checks)
-    holds = level.holds and lem.holds
+    value, route_checks, route = lem.bound, lem.sharp_checks, "lemma"
+    if comparison_gain is not None:
+        cmp = up_closed_form(comparison_gain * tau0)
+        if cmp < value:
+            value, route = cmp, "comparison"
+            route_checks = (
+                check_le(
+                    "tasil.comparison",
+                    cmp,
+                    math.inf,
+                    f"learned loop contracting on R^n: gap <= sup||g||_2 / lambda_IL * tau0 = "
+                    f"{comparison_gain:.6g} * {tau0:.6g}",
+                    "docs/math/tasil.md section 3.7",
+                ),
+            )
+    checks = (level, *route_checks)
+    finite = math.isfinite(value)
+    holds = level.holds and finite
     note = (
         f"with prob >= 1 - delta/2 over {n_val} held-out trajectories ({k} exceed "
-        f"tau=({tau0:.4g}, {tau1:.4g})): P_xi[gap > {lem.bound:.4g}] <= {eps:.4g}; joint level "
+        f"tau=({tau0:.4g}, {tau1:.4g})): P_xi[gap > {value:.4g}] <= {eps:.4g}; joint level "
         f"1 - delta needs that <= delta/2"
     )
-    if not lem.holds:
+    if route == "comparison":
+        note += f" (comparison bound of the learned loop; the lemma gives {lem.bound:.4g})"
+    elif not lem.holds:
         note += f"; lemma fails at tau: {lem.reason}"
-    return TasilForm("held_out", lem.bound, holds, eps >= 1.0 or not lem.holds, note, eps, checks)
+    return TasilForm("held_out", value, holds, eps >= 1.0 or not finite, note, eps, checks)
 
 
 def form_threshold(obs, tau, c, n, gamma0, L, eta, R, delta, cont) -> TasilForm:

@@ -86,6 +86,7 @@ def tasil_section(
     room: float = math.inf,
     speed_sound: bool = False,
     method: str = "tasil-1",
+    comparison_gain: Quantity | None = None,
 ) -> tuple[TasilCertificate, dict[str, Any], tuple[Quantity, ...]]:
     """The TaSIL certificate of ``s.learned`` (docs/math/tasil.md sections 3-4).
 
@@ -107,6 +108,9 @@ def tasil_section(
         wherever they go), which makes the continuous-time sups of ``h_0, h_1`` sound.
     settings, method
         The ``[tasil]`` settings (``delta``, ``eta``, ``tube_radius``) and the recorded method.
+    comparison_gain
+        ``sup||g||_2 / lambda_IL`` when the learned closed loop is proved to contract on all of
+        ``R^n`` (never an estimate): the comparison bound of docs/math/tasil.md section 3.7.
 
     Returns
     -------
@@ -201,7 +205,15 @@ def tasil_section(
         heldout_h1=heldout_h1,
         method=method,
         continuous=True,
+        comparison_gain=None if comparison_gain is None else comparison_gain.value,
     )
+    if comparison_gain is not None:
+        provenance["comparison_gain"] = comparison_gain.to_dict()
+        used = cert.gap_route == "comparison" or any(
+            c.id == "tasil.comparison" for f in cert.forms for c in f.checks
+        )
+        if used:  # the TaSIL check then rests on it (and on the learned loop's rate)
+            qs.append(comparison_gain)
     provenance["h_how"] = how_t.value
     h_note = (
         "continuous-time sup along the expert trajectories (docs/math/tasil.md section 4)"
