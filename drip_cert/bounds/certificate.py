@@ -683,12 +683,8 @@ def _certify_in(spec: Spec, demonstrations: DemonstrationSet | None, stage: Stag
         except AssumptionViolation as exc:  # pragma: no cover - guarded by r.holds
             notes.append(str(exc))
         else:
-            gamma0 = Quantity.derive(
-                "gamma0",
-                div_up(ic.Delta_g_spectral.value, lam_ex.value),
-                inputs=[ic.Delta_g_spectral, lam_ex],
-                source="delta-ISS gain (comparison lemma)",
-                note="sup||g||_2 / lambda, rounded up",
+            gamma0 = _input_gain(
+                "gamma0", ic.Delta_g_spectral, lam_ex, "delta-ISS gain (comparison lemma)"
             )
             extra_q.append(gamma0)
     else:
@@ -715,12 +711,11 @@ def _certify_in(spec: Spec, demonstrations: DemonstrationSet | None, stage: Stag
         if cl is not None and cl.euclidean.holds and cl.euclidean.scope.all_x:
             lam_il = cl.euclidean.to_quantity()
             if lam_il.how != How.ESTIMATE and lam_il.value > 0:
-                cmp_gain = Quantity.derive(
+                cmp_gain = _input_gain(
                     "gamma_IL",
-                    div_up(ic.Delta_g_spectral.value, lam_il.value),
-                    inputs=[ic.Delta_g_spectral, lam_il.renamed("lambda_learned")],
-                    source="comparison bound of the learned loop (docs/math/tasil.md section 3.7)",
-                    note="sup||g||_2 / lambda_IL, rounded up",
+                    ic.Delta_g_spectral,
+                    lam_il.renamed("lambda_learned"),
+                    "comparison bound of the learned loop (docs/math/tasil.md section 3.7)",
                 )
         tasil, tasil_prov, tq = tasil_section(
             s,
@@ -855,6 +850,18 @@ def _expert_scope(r: Any, inv: InvariantSet | None, horizon: float) -> tuple[boo
     return False, (
         f"the expert rate is proved only on {r.region}"
         + (f"; {inv.reason}" if inv is not None else "")
+    )
+
+
+def _input_gain(name: str, g_norm: Quantity, lam: Quantity, source: str) -> Quantity:
+    """``sup||g||_2 / lambda`` rounded up: the gain from an input-space disturbance to the state
+    gap of a loop contracting at ``lambda`` (the comparison lemma); labelled from its inputs."""
+    return Quantity.derive(
+        name,
+        div_up(g_norm.value, lam.value),
+        inputs=[g_norm, lam],
+        source=source,
+        note=f"sup||g||_2 / {lam.name}, rounded up",
     )
 
 
