@@ -17,7 +17,7 @@ from typing import Any
 from drip_cert.bounds.l1drac.toml import design_l1_report
 from drip_cert.errors import AssumptionViolation, DripCertError, SpecError
 from drip_cert.numerics.atomic_io import jsonable
-from drip_cert.report import certificate_markdown, l1_design_text, validation_text
+from drip_cert.report import certificate_markdown, l1_design_text, train_text, validation_text
 from drip_cert.spec import load_spec
 from drip_cert.workflows import reproduce, train_from_spec, validate_spec
 
@@ -90,15 +90,18 @@ def cmd_train(args: argparse.Namespace) -> int:
         out=args.out,
         steps=args.steps,
         progress=not args.json,
+        certify=not args.no_certify,
+        compare=not args.no_compare,
+        until_certified=args.until_certified,
+        max_heldout_gap=args.max_heldout_gap,
     )
     if args.json:
         _print_json(summary)
     else:
-        print(
-            f"trained {summary['method']} policy in {summary['wall_s']:.1f} s; "
-            f"held-out gap {summary['heldout_gap_mean']:.4g} (mean), written to {args.out}"
-        )
-    return 0
+        print(train_text(summary, args.out))
+    for why in summary["failures"]:
+        print(f"drip-cert: training failed: {why}", file=sys.stderr)
+    return 0 if summary["ok"] else 1
 
 
 def cmd_validate(args: argparse.Namespace) -> int:
@@ -167,6 +170,24 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("--steps", type=_posint, default=None)
     q.add_argument("--out", required=True)
     q.add_argument("--json", action="store_true")
+    q.add_argument("--no-certify", action="store_true", help="skip the certificate of the policy")
+    q.add_argument(
+        "--no-compare", action="store_true", help="do not train the other method for comparison"
+    )
+    q.add_argument(
+        "--until-certified",
+        type=_posint,
+        default=0,
+        metavar="ROUNDS",
+        help="retrain with twice the steps (at most ROUNDS rounds) until the verdict is certified",
+    )
+    q.add_argument(
+        "--max-heldout-gap",
+        type=float,
+        default=None,
+        help="exit 1 when the held-out mean gap exceeds this (default: [tasil] max_heldout_gap, "
+        "else the size of the held-out expert trajectories)",
+    )
     q.set_defaults(func=cmd_train)
 
     q = sub.add_parser("validate", help="check a certificate against Monte-Carlo simulation")

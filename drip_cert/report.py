@@ -345,3 +345,33 @@ def reproduce_markdown(summary: dict[str, Any], cert: Any, runs: dict[str, Any])
     lines += ["## Timings", "", "| step | seconds |", "|---|---|"]
     lines += [f"| {k} | {v:.1f} |" for k, v in t.items()]
     return "\n".join(lines) + "\n"
+
+
+def train_text(summary: dict[str, Any], out: str) -> str:
+    """The text ``drip-cert train`` prints: the policy, its held-out gap beside the other
+    method's, and the certificate's verdict with its binding condition and margin."""
+    lines = [
+        f"trained {summary['method']} ({summary['architecture']} policy) in "
+        f"{summary['wall_s']:.1f} s, stop: {summary['stop_reason']} (best step "
+        f"{summary['best_step']}); written to {out}",
+        f"held-out gap mean {summary['heldout_gap_mean']:.4g}, max "
+        f"{summary['heldout_gap_max']:.4g} (threshold {summary['heldout_gap_threshold']:.4g})",
+    ]
+    for m, g in summary["comparison"].items():
+        if m != summary["method"]:
+            lines.append(
+                f"  {m} on the same data and budget: held-out gap mean "
+                f"{g['heldout_gap_mean']:.4g}, max {g['heldout_gap_max']:.4g}"
+            )
+    b = summary.get("certificate")
+    if b is not None:
+        lines.append(f"certificate: {b['verdict'].upper()}; binding condition: {b['text']}")
+    if len(summary.get("rounds", ())) > 1:
+        lines.append(
+            "rounds (--until-certified): "
+            + ", ".join(
+                f"{r['steps']} steps -> {r['binding']['verdict'] if r['binding'] else 'n/a'}"
+                for r in summary["rounds"]
+            )
+        )
+    return "\n".join(lines)

@@ -159,7 +159,12 @@ def run_pipeline(
             stage(f"training {method} ({st.steps} steps)")
             t0 = time.perf_counter()
             trained[method] = train_on_system(
-                s, st, method=method, progress=progress, demonstrations=demos
+                s,
+                st,
+                method=method,
+                progress=progress,
+                demonstrations=demos,
+                structure=spec.structure,
             )
             timings[f"train_{method}_s"] = time.perf_counter() - t0
             if demos.heldout is not None:
@@ -220,11 +225,13 @@ def _heldout_gap(s: Any, tp: TrainedPolicy, samples: int) -> np.ndarray:
     from drip_cert.learn.tasil import evaluate_gap  # jax: keep off the CLI start-up path
 
     assert tp.heldout is not None  # called only when held-out demonstrations exist
+    policy = tp.system.numeric.learned  # the whole learned policy (structure + K x + network)
+    assert policy is not None
     return np.asarray(
         evaluate_gap(
             nominal_field(s),
             s.numeric.expert,
-            tp.mlp.apply_jax,
+            policy,
             tp.heldout.x0,
             s.horizon,
             samples,
@@ -242,29 +249,59 @@ def train_from_spec(
     out: str | Path,
     steps: int | None = None,
     progress: bool = True,
+    certify: bool = True,
+    compare: bool = True,
+    until_certified: int = 0,
+    max_heldout_gap: float | None = None,
 ) -> dict[str, Any]:
-    """``drip-cert train``: demonstrations, training, held-out gap; writes ``out``.
+    """``drip-cert train``: demonstrations, training, held-out gap, certificate; writes ``out``.
 
     Files: ``policy.npz``/``policy.json`` (the MLP), ``demonstrations.npz`` (training data),
-    ``train.json`` (settings, losses, timings, held-out gaps). Every file is written atomically.
-    ``use_in_spec`` in ``train.json`` is the TOML that makes a spec certify this policy on these
-    demonstrations (the ``[tasil]`` seed and sizes included).
+    ``train.json`` (settings, losses, timings, held-out gaps, the certificate's verdict and
+    binding condition). Every file is written atomically. ``use_in_spec`` in ``train.json`` is the
+    TOML that makes a spec certify this policy on these demonstrations (for a residual policy the
+    learned expressions carry the structure and the learned ``K``).
+
+    ``compare``: train the other method (BC for TaSIL and vice versa) on the same demonstrations
+    and budget and report both held-out gaps. ``until_certified = R > 0``: when the certificate
+    is not certified and its binding condition is one training can change (the TaSIL bound, the
+    learned loop's contraction, the L1-DRAC design), train again with twice the steps, at most
+    ``R`` rounds in all; other binding conditions (the expert's assumptions) stop at once with
+    the reason. ``summary["ok"]`` is ``False`` (exit 1) when training diverged, the held-out gap
+    exceeds the threshold (``max_heldout_gap``, else ``[tasil] max_heldout_gap``, else the size
+    of the held-out expert trajectories, :data:`GAP_THRESHOLD_NOTE`), or ``until_certified`` ended
+    without a certified verdict.
     """
     from drip_cert.learn.data import save_demonstrations  # jax: keep off the CLI start-up path
 
     spec = load_spec(spec_path)
-    over: dict[str, Any] = {"trajectories": trajectories, "method": method}
-    if steps:
-        over["steps"] = steps
-    run = run_pipeline(
-        spec,
-        seed=seed,
-        train=True,
-        methods=(method,),
-        tasil=over,
-        certify=False,
-        progress=progress,
-    )
+    other = "bc" if method == "tasil" else "tasil"
+    methods = (method, other) if compare else (method,)
+    steps0 = steps or spec.settings.tasil.steps
+    rounds: list[dict[str, Any]] = []
+    run = None
+    for r in range(max(until_certified, 1)):
+        over: dict[str, Any] = {
+            "trajectories": trajectories,
+            "method": method,
+            "steps": steps0 * 2**r,
+        }
+        run = run_pipeline(
+            spec,
+            seed=seed,
+            train=True,
+            methods=methods,
+            tasil=over,
+            certify=certify,
+            progress=progress,
+        )
+        binding = _binding(run.certificate) if run.certificate is not None else None
+        rounds.append({"steps": over["steps"], "binding": binding})
+        if not until_certified or binding is None or binding["certified"]:
+            break
+        if not binding["trainable"]:
+            break
+    assert run is not None
     tp = run.trained[method]
     st = tp.settings
     s = spec.system
@@ -273,9 +310,19 @@ def train_from_spec(
     out.mkdir(parents=True, exist_ok=True)
     tp.mlp.save(out / "policy.npz")
     save_demonstrations(tp.train, out / "demonstrations.npz")
+    failures = _training_failures(tp, gaps, spec, max_heldout_gap)
+    binding = rounds[-1]["binding"]
+    if until_certified and binding is not None and not binding["certified"]:
+        failures.append(
+            f"not certified after {len(rounds)} round(s) of training (up to "
+            f"{rounds[-1]['steps']} steps): {binding['text']}"
+            + ("" if binding["trainable"] else " (more training cannot change this condition)")
+        )
+    learned = [str(e) for e in _learned_strings(spec, tp)]
     summary = {
         "method": method,
         "order": st.order if method == "tasil" else 0,
+        "architecture": st.architecture,
         "trajectories": trajectories,
         "seed": seed,
         "steps": st.steps,
@@ -285,11 +332,21 @@ def train_from_spec(
         "stop_reason": tp.result.stop_reason,
         "heldout_gap_mean": float(np.mean(gaps)) if gaps.size else math.nan,
         "heldout_gap_max": float(np.max(gaps)) if gaps.size else math.nan,
+        "heldout_gap_threshold": _gap_threshold(tp, spec, max_heldout_gap),
+        "linear": None if tp.result.linear is None else np.asarray(tp.result.linear).tolist(),
+        "comparison": {
+            m: {"heldout_gap_mean": float(np.mean(g)), "heldout_gap_max": float(np.max(g))}
+            for m, g in run.heldout_gaps.items()
+        },
+        "certificate": binding,
+        "rounds": rounds,
+        "ok": not failures,
+        "failures": failures,
         "policy": str(out / "policy.npz"),
         "use_in_spec": (
             '[blocks.pi_il]\nkind = "mlp"\nweights = "policy.npz"\n'
             f"inputs = {s.n}\noutputs = {s.m}\n\n[policy]\nlearned = ["
-            + ", ".join(f'"pi_il(x)[{j}]"' for j in range(s.m))
+            + ", ".join(f'"{e}"' for e in learned)
             + "]\n\n[tasil]  # the demonstrations this policy was trained on\n"
             f'method = "{method}"\nseed = {seed}\ntrajectories = {trajectories}\n'
             f"samples = {st.samples}\nheldout = {st.heldout}"
@@ -297,6 +354,97 @@ def train_from_spec(
     }
     atomic_write_json(out / "train.json", summary)
     return summary
+
+
+GAP_THRESHOLD_NOTE = (
+    "default threshold: the mean over the held-out trajectories of max_t ||x*_t||, the size of "
+    "the expert's own trajectories (a policy whose gap is that large does not track the expert)"
+)
+
+#: checks whose failure more or longer training can change
+_TRAINABLE = ("TaSIL", "L1DRAC-A2", "L1DRAC-A7", "L1DRAC-design")
+
+
+def _binding(cert: Certificate) -> dict[str, Any]:
+    """The certificate's verdict and binding condition: the first failing check, else the check
+    with the smallest relative margin ``margin / max(|lhs|, |rhs|)``."""
+    checks = [c for c in cert.assumptions if c.status != "holds" or not c.scope_ok]
+    if checks:
+        c = checks[0]
+    else:
+
+        def rel(c: Any) -> float:
+            scale = max(abs(c.lhs), abs(c.rhs)) if math.isfinite(c.lhs) else abs(c.rhs)
+            m = c.margin
+            if not math.isfinite(m) or not math.isfinite(scale) or scale == 0:
+                return math.inf
+            return m / scale
+
+        c = min(cert.assumptions, key=rel)
+    return {
+        "verdict": cert.verdict.value,
+        "certified": cert.certified,
+        "check": c.id,
+        "holds": c.holds,
+        "margin": _json_safe(c.margin),
+        "trainable": c.id in _TRAINABLE,
+        "text": f"{c.id} {'holds' if c.holds else 'fails'} (margin {c.margin:.4g}): {c.detail}",
+        "rho_tasil": _json_safe(cert.rho_tasil),
+        "rho_l1": _json_safe(cert.rho_l1),
+    }
+
+
+def _json_safe(v: float | None) -> float | None:
+    """``None`` for a missing or non-finite number (JSON has no inf)."""
+    return None if v is None or not math.isfinite(v) else float(v)
+
+
+def _gap_threshold(tp: TrainedPolicy, spec: Spec, given: float | None) -> float:
+    if given is not None:
+        return float(given)
+    if math.isfinite(spec.settings.tasil.max_heldout_gap):
+        return float(spec.settings.tasil.max_heldout_gap)
+    demos = tp.heldout if tp.heldout is not None else tp.train
+    return float(np.mean(np.max(np.linalg.norm(demos.states, axis=-1), axis=1)))
+
+
+def _training_failures(
+    tp: TrainedPolicy, gaps: np.ndarray, spec: Spec, given: float | None
+) -> list[str]:
+    """Why a training run is not usable: divergence, or a held-out gap above the threshold."""
+    out = []
+    if tp.result.stop_reason == "non-finite loss":
+        out.append(
+            f"training diverged (non-finite held-out loss after step {tp.result.best_step}); "
+            "lower [tasil] lr or use fewer steps"
+        )
+    if gaps.size:
+        mean = float(np.mean(gaps))
+        thr = _gap_threshold(tp, spec, given)
+        if not math.isfinite(mean):
+            out.append("the learned closed loop diverges from some held-out initial states")
+        elif mean > thr:
+            out.append(
+                f"held-out gap mean {mean:.4g} exceeds the threshold {thr:.4g}"
+                + ("" if given is not None else f" ({GAP_THRESHOLD_NOTE})")
+            )
+    return out
+
+
+def _learned_strings(spec: Spec, tp: TrainedPolicy) -> list[str]:
+    """The learned policy in the spec language: ``structure + K x + pi_il(x)[j]``."""
+    s = spec.system
+    K = tp.result.linear
+    out = []
+    for j in range(s.m):
+        parts = []
+        if tp.settings.architecture == "residual" and spec.structure_text is not None:
+            parts.append(f"({spec.structure_text[j]})")
+        if K is not None:
+            parts += [f"({float(K[j, i])!r})*{x}" for i, x in enumerate(s.states)]
+        parts.append(f"pi_il(x)[{j}]")
+        out.append(" + ".join(parts))
+    return out
 
 
 def validate_spec(

@@ -634,7 +634,7 @@ def _certify_in(spec: Spec, demonstrations: DemonstrationSet | None, stage: Stag
     cl = None
     if s.learned is not None:
         stage("contraction rate of the learned closed loop")
-        cl = analyse_contraction(s, "learned", opts)
+        cl = _learned_contraction(s, opts, lam_ex, notes)
         rl = cl.euclidean
         a2l = _rate_check(
             "L1DRAC-A2",
@@ -717,6 +717,10 @@ def _certify_in(spec: Spec, demonstrations: DemonstrationSet | None, stage: Stag
                     lam_il.renamed("lambda_learned"),
                     "comparison bound of the learned loop (docs/math/tasil.md section 3.7)",
                 )
+        uniform_h0 = None
+        if cmp_gain is not None:
+            stage("sup of ||pi_IL - pi*|| over a set holding every expert trajectory")
+            uniform_h0 = _uniform_h0(s, r, inv, notes)
         tasil, tasil_prov, tq = tasil_section(
             s,
             train,
@@ -727,6 +731,7 @@ def _certify_in(spec: Spec, demonstrations: DemonstrationSet | None, stage: Stag
             speed_sound=r.scope.all_x or (inv is not None and inv.proved),
             method=f"{st.method}-{st.order}",
             comparison_gain=cmp_gain,
+            uniform_h0=uniform_h0,
         )
         extra_q.extend(q for q in tq if q.name != "gamma0")
     if tasil is not None:
@@ -823,6 +828,58 @@ def _certify_in(spec: Spec, demonstrations: DemonstrationSet | None, stage: Stag
         invariance=inv,
         extra_quantities=tuple(extra_q),
     )
+
+
+def _learned_contraction(
+    s: System, opts: ContractionSettings, lam_ex: Quantity, notes: list[str]
+) -> ContractionAnalysis:
+    """The learned loop's rate: first the global routes for loops affine in MLP blocks
+    (:mod:`drip_cert.analysis.learned_loop`; L1-DRAC needs all of R^n), then, when they prove
+    nothing, the configured route on the contraction region (a box result)."""
+    from drip_cert.analysis.learned_loop import best_global_rate
+
+    g = best_global_rate(s, lam_ex)
+    if g is not None and g.result.holds and g.result.how != How.ESTIMATE:
+        notes.append(
+            f"learned closed loop: rate {g.result.rate:.6g} proved on all x by the "
+            f"{g.result.method} route ({g.result.note})"
+        )
+        return ContractionAnalysis("learned", g.result, None)
+    if g is not None:
+        notes.append(
+            f"learned closed loop: the global {g.result.method} route gives {g.result.rate:.6g} "
+            f"(not a contraction: {g.result.note}); the box route follows"
+        )
+    return analyse_contraction(s, "learned", opts)
+
+
+def _uniform_h0(s: System, r: Any, inv: InvariantSet | None, notes: list[str]) -> Quantity | None:
+    """``sup_{x in S} ||pi_IL(x) - pi*(x)||`` (sound) over a box ``S`` proved to hold every
+    expert trajectory from the support on ``[0, T]``: the support itself when it is forward
+    invariant (Nagumo), else the box around a proved invariant ball; ``None`` when neither is
+    proved or the difference is not affine in MLP blocks."""
+    from drip_cert.analysis.invariance import invariant_box
+    from drip_cert.analysis.learned_loop import sup_policy_difference
+
+    support = np.asarray(s.support, dtype=float)
+    enclose = block_enclose_callback(s.blocks) if s.blocks else None
+    S = None
+    if r.holds and r.how.proved and r.scope.all_x and r.scope.covers_time(s.horizon):
+        try:
+            if invariant_box(s.closed_loop("expert"), s.states, s.t, support, s.horizon, enclose):
+                S, why = support, "the support (forward invariant for the expert, Nagumo)"
+        except DripCertError:
+            S = None
+    if S is None and inv is not None and inv.proved and inv.centre:
+        c = np.asarray(inv.centre, dtype=float)
+        S = np.stack([c - inv.radius, c + inv.radius], axis=1)
+        why = f"the box around the expert's invariant ball (radius {inv.radius:.4g})"
+    if S is None:
+        return None
+    q = sup_policy_difference(s, S)
+    if q is not None:
+        notes.append(f"sup ||pi_IL - pi*|| over {why}: {q.note}")
+    return q
 
 
 def _nan_max(a: float, b: float) -> float:

@@ -10,13 +10,15 @@ learned system.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+import dataclasses
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+import sympy as sp
 
-from drip_cert._jax import jax
+from drip_cert._jax import jax, jnp
 from drip_cert.errors import SpecError
 from drip_cert.learn.data import Demonstrations, generate_demonstrations
 from drip_cert.model.blocks import mlp_block
@@ -52,8 +54,18 @@ def demonstrations(s: System, n: int, k: int, seed: int, stream: int = 0) -> Dem
     )
 
 
-def learned_system(s: System, mlp: MLP, name: str = POLICY_BLOCK, source: str = "") -> System:
-    """``s`` with ``pi_IL = mlp`` as a block named ``name`` (``pi_il(x)[j]``)."""
+def learned_system(
+    s: System,
+    mlp: MLP,
+    name: str = POLICY_BLOCK,
+    source: str = "",
+    *,
+    linear: np.ndarray | None = None,
+    structure: Sequence[sp.Expr] | None = None,
+) -> System:
+    """``s`` with ``pi_IL = structure(x) + K x + mlp(x)``, the network a block named ``name``
+    (``pi_il(x)[j]``); ``structure`` and the linear term ``K = linear`` are optional (the residual
+    policy class, :func:`train_on_system`). ``K``'s entries enter as exact binary floats."""
     if mlp.in_dim != s.n or mlp.out_dim != s.m:
         raise SpecError(
             f"the policy maps R^{mlp.in_dim} -> R^{mlp.out_dim}, the system needs "
@@ -61,7 +73,26 @@ def learned_system(s: System, mlp: MLP, name: str = POLICY_BLOCK, source: str = 
         )
     block = mlp_block(name, mlp, source=source)
     exprs = [block.component(j)(*s.states) for j in range(s.m)]
+    if linear is not None:
+        K = np.asarray(linear, dtype=float)
+        exprs = [
+            e + sum(sp.Float(float(K[j, i]), 17) * xi for i, xi in enumerate(s.states))
+            for j, e in enumerate(exprs)
+        ]
+    if structure is not None:
+        exprs = [sp.sympify(b) + e for b, e in zip(structure, exprs, strict=True)]
     return s.with_learned(exprs, {name: block})
+
+
+def structure_function(s: System, structure: Sequence[sp.Expr] | None):
+    """``x -> structure(x)`` (jax-traceable; zeros when ``None``): the known part of a residual
+    policy, lowered like any policy of ``s``."""
+    if structure is None:
+        m = s.m
+        return lambda x: jnp.zeros(x.shape[:-1] + (m,), dtype=x.dtype)
+    base = s.with_learned(list(structure)).numeric.learned
+    assert base is not None  # with_learned sets it
+    return base
 
 
 @dataclass(frozen=True)
@@ -115,19 +146,41 @@ def train_on_system(
     method: str | None = None,
     progress: bool = False,
     demonstrations: DemonstrationSet | None = None,
+    structure: Sequence[sp.Expr] | None = None,
 ) -> TrainedPolicy:
     """Train TaSIL (or BC, ``method``) on expert demonstrations and attach the policy to ``s``.
 
     ``demonstrations`` are drawn by :func:`demonstration_set` from ``settings`` when not given;
     training uses ``settings.seed`` for its own randomness (initialisation, batches).
+
+    ``settings.architecture == "residual"``: the policy is ``structure(x) + K x + N(x)`` with the
+    known ``structure`` (``[policy] structure``; 0 when ``None``), a learned matrix ``K`` and an
+    MLP ``N`` whose product of layer spectral norms stays within ``settings.lipschitz_budget``.
+    The loss is the same TaSIL/BC loss, on the residual targets ``pi*(x) - structure(x)`` and
+    their derivatives (the structure is fixed, so matching the residual is matching ``pi*``).
     """
     from drip_cert.learn.tasil import train_policy  # optax: keep off the API's import path
 
     method = method or settings.method
     demos = demonstration_set(s, settings) if demonstrations is None else demonstrations
+    residual = settings.architecture == "residual"
+    expert = s.numeric.expert
+    train_demos = demos.train
+    if residual:
+        base = structure_function(s, structure)
+        full_expert = expert
+
+        def expert(x):
+            return full_expert(x) - base(x)
+
+        st = train_demos.states
+        offset = np.asarray(jax.vmap(base)(st.reshape(-1, st.shape[-1]))).reshape(
+            *st.shape[:-1], s.m
+        )
+        train_demos = dataclasses.replace(train_demos, actions=train_demos.actions - offset)
     res = train_policy(
-        demos.train,
-        s.numeric.expert,
+        train_demos,
+        expert,
         method=method,
         order=settings.order,
         hidden=settings.hidden,
@@ -137,5 +190,10 @@ def train_on_system(
         lr=settings.lr,
         batch=settings.batch,
         progress=progress,
+        skip=residual,
+        lipschitz_budget=settings.lipschitz_budget if residual else float("inf"),
     )
-    return TrainedPolicy(learned_system(s, res.mlp), res.mlp, res, demos, settings, method)
+    system = learned_system(
+        s, res.mlp, linear=res.linear, structure=structure if residual else None
+    )
+    return TrainedPolicy(system, res.mlp, res, demos, settings, method)

@@ -21,6 +21,7 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from functools import partial
+from typing import Any
 
 import numpy as np
 import optax
@@ -60,6 +61,8 @@ class TrainSettings:
     lambda_j: float = 1.0
     lambda_h: float = 10.0
     reduction: str = "mean"
+    skip: bool = False
+    lipschitz_budget: float = float("inf")
 
     def __post_init__(self) -> None:
         if self.method not in METHODS:
@@ -89,6 +92,11 @@ class TrainSettings:
         if self.schedule not in SCHEDULES:
             raise SpecError(
                 f"schedule must be one of {SCHEDULES}, got {self.schedule!r}", field="schedule"
+            )
+        if not (self.lipschitz_budget > 0):  # NaN fails too
+            raise SpecError(
+                f"lipschitz_budget must be > 0 (inf: none), got {self.lipschitz_budget!r}",
+                field="lipschitz_budget",
             )
         if not (0.0 <= self.val_fraction < 1.0):
             raise SpecError(
@@ -141,6 +149,9 @@ class TrainResult:
         :class:`TrainSettings`.
     train_index, val_index
         Trajectory indices of the two splits.
+    linear
+        ``(m, n)`` matrix ``K`` of the learned linear term when ``settings.skip``: the policy is
+        ``x -> K x + mlp(x)``; ``None`` otherwise.
     """
 
     mlp: MLP
@@ -154,10 +165,16 @@ class TrainResult:
     settings: TrainSettings
     train_index: tuple[int, ...]
     val_index: tuple[int, ...]
+    linear: np.ndarray | None = None
 
     def policy(self) -> Callable:
-        """The learned policy ``x -> u`` as a jax-traceable function."""
-        return self.mlp.apply_jax
+        """The learned policy ``x -> u`` as a jax-traceable function (``K x + mlp(x)`` with a
+        linear term)."""
+        if self.linear is None:
+            return self.mlp.apply_jax
+        K = jnp.asarray(self.linear)
+        apply = self.mlp.apply_jax
+        return lambda x: apply(x) + x @ K.T
 
 
 def train_policy(
@@ -182,6 +199,8 @@ def train_policy(
     lambda_h: float = 10.0,
     reduction: str = "mean",
     output_activation: str | None = None,
+    skip: bool = False,
+    lipschitz_budget: float = float("inf"),
 ) -> TrainResult:
     """Train an MLP policy on expert demonstrations by TaSIL (DRIP eq. (LossTaSIL)) or BC.
 
@@ -220,6 +239,15 @@ def train_policy(
         Loss weights and reduction, see :class:`~drip_cert.learn.losses.LossSpec`.
     output_activation
         Optional activation of the output layer (``None``: affine output).
+    skip
+        Learn ``x -> K x + mlp(x)`` (a linear term beside the network; ``K`` and the output bias
+        start at the least-squares fit of the training actions, the last layer at 0).
+    lipschitz_budget
+        After every Adam step each layer ``W_k`` of the network is scaled by
+        ``min(1, b / ||W_k||_2)`` with ``b = budget^(1/L)`` (projected gradient), so the product
+        of spectral norms -- an upper bound of the network's Lipschitz constant for 1-Lipschitz
+        activations -- stays within the budget (up to float rounding; the certificate re-bounds
+        it rigorously). ``inf``: no constraint.
 
     Returns
     -------
@@ -243,6 +271,8 @@ def train_policy(
         lambda_j=lambda_j,
         lambda_h=lambda_h,
         reduction=reduction,
+        skip=skip,
+        lipschitz_budget=lipschitz_budget,
     )
     if not isinstance(demos, Demonstrations):
         raise SpecError(
@@ -269,9 +299,17 @@ def train_policy(
     axis = 1 if spec.reduction == "mean" else 0
     batch_size = min(settings.batch, int(pool.states.shape[axis]))
 
-    net = _Net(settings.activation, settings.output_activation)
+    net = _Net(
+        settings.activation,
+        settings.output_activation,
+        settings.skip,
+        settings.lipschitz_budget,
+    )
     lr_args = (jnp.asarray(float(settings.lr)), jnp.asarray(float(settings.steps)))
-    params = [(jnp.asarray(w), jnp.asarray(b)) for w, b in mlp0.params()]
+    params: Any = [(jnp.asarray(w), jnp.asarray(b)) for w, b in mlp0.params()]
+    if settings.skip:
+        params = _skip_init(params, demos.state_dim, demos.input_dim)
+    params = net.project(params)
     opt_state = _adam(*lr_args, settings.schedule).init(params)
     key = jax.random.PRNGKey(seed)
 
@@ -316,9 +354,14 @@ def train_policy(
             if step - best_step >= settings.patience and step < settings.steps:
                 stop_reason = "patience"
                 break
+    linear = None
+    if settings.skip:
+        best_params, K = best_params
+        linear = np.asarray(K, dtype=float)
     mlp = mlp_from_params(best_params, settings.activation, settings.output_activation)
     return TrainResult(
         mlp=mlp,
+        linear=linear,
         method=settings.method,
         order=spec.order,
         history=TrainHistory(tuple(hist_steps), tuple(hist_train), tuple(hist_val)),
@@ -334,13 +377,38 @@ def train_policy(
 
 @dataclass(frozen=True)
 class _Net:
-    """Static description of the network's activations (hashable, for jit caching)."""
+    """Static description of the network (hashable, for jit caching): activations, whether a
+    linear term ``K x`` sits beside it (``params = (layers, K)``), and the Lipschitz budget."""
 
     activation: str
     output_activation: str | None
+    skip: bool = False
+    budget: float = float("inf")
 
     def policy(self, params) -> Callable:
+        if self.skip:
+            layers, K = params
+            return lambda x: (
+                apply_params(layers, x, self.activation, self.output_activation, xp=jnp) + x @ K.T
+            )
         return lambda x: apply_params(params, x, self.activation, self.output_activation, xp=jnp)
+
+    def project(self, params):
+        """Scale each layer to spectral norm ``<= budget^(1/L)`` (identity for ``inf``)."""
+        if not np.isfinite(self.budget):
+            return params
+        layers, K = params if self.skip else (params, None)
+        b = self.budget ** (1.0 / len(layers))
+        out = []
+        for w, bias in layers:
+            s = jnp.linalg.norm(w, 2)
+            out.append((w * jnp.minimum(1.0, b / jnp.maximum(s, 1e-300)), bias))
+        return (out, K) if self.skip else out
+
+
+def _skip_init(layers, n: int, m: int):
+    """``(layers, K)`` with ``K = 0``: the linear term is learned like every other weight."""
+    return layers, jnp.zeros((m, n))
 
 
 def _adam(lr, total_steps, schedule: str) -> optax.GradientTransformation:
@@ -382,7 +450,7 @@ def _run_chunk(
         )
         value, grads = jax.value_and_grad(loss_of)(p, _take_axis(pool, idx, axis))
         updates, s = opt.update(grads, s, p)
-        return (optax.apply_updates(p, updates), s), value
+        return (net.project(optax.apply_updates(p, updates)), s), value
 
     (params, opt_state), _ = jax.lax.scan(body, (params, opt_state), step0 + jnp.arange(n_steps))
     return params, opt_state

@@ -33,7 +33,7 @@ from drip_cert.spec.settings import TABLES, Settings, toml_text
 SECTIONS = {
     "system": {"name", "states", "inputs", "horizon", "time", "brownian_dim"},
     "dynamics": {"f", "g", "A", "B", "diffusion"},
-    "policy": {"expert", "learned", "lqr"},
+    "policy": {"expert", "learned", "lqr", "structure"},
     "blocks": None,  # table of tables, checked per block
     "uncertainty": {"drift", "diffusion", "Delta_mu", "Delta_sigma"},
     "initial": {"support", "true_support"},
@@ -65,6 +65,8 @@ class Spec:
     tables: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)
     settings: Settings = None  # type: ignore[assignment]  # built in __post_init__
     expert_gain: ExpertGain | None = None
+    structure: tuple[sp.Expr, ...] | None = None  #: [policy] structure (residual policy class)
+    structure_text: tuple[str, ...] | None = None  #: the same, as written in the spec
 
     def __post_init__(self) -> None:
         if self.settings is None:
@@ -300,6 +302,11 @@ def spec_from_dict(doc: Mapping[str, Any], path: Path | None = None) -> Spec:
     learned = (
         vector(pol["learned"], "policy.learned", m, allow_t=False) if "learned" in pol else None
     )
+    structure = (
+        tuple(vector(pol["structure"], "policy.structure", m, allow_t=False))
+        if "structure" in pol
+        else None
+    )
     inputs = sysd.get("inputs")
     if inputs is not None:
         inputs = _names(inputs, "system.inputs", err)
@@ -370,7 +377,22 @@ def spec_from_dict(doc: Mapping[str, Any], path: Path | None = None) -> Spec:
         raise SpecError(str(exc), path=spath) from None
     tables = MappingProxyType({k: MappingProxyType(dict(doc[k])) for k in TABLES if k in doc})
     settings = Settings.from_tables(tables, n, path=spath, support=system.support)
-    return Spec(path=path, system=system, tables=tables, settings=settings, expert_gain=expert_gain)
+    if structure is not None and settings.tasil.architecture != "residual":
+        raise SpecError(
+            "[policy] structure is the known part of a residual policy: it is used only with "
+            '[tasil] architecture = "residual"; add that line or remove structure',
+            field="policy.structure",
+            path=spath,
+        )
+    return Spec(
+        path=path,
+        system=system,
+        tables=tables,
+        settings=settings,
+        expert_gain=expert_gain,
+        structure=structure,
+        structure_text=None if structure is None else tuple(str(e) for e in pol["structure"]),
+    )
 
 
 def _dynamics_form(dyn: Mapping[str, Any], err) -> str:

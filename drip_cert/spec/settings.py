@@ -588,6 +588,9 @@ class TasilSettings:
     eta: float = math.inf  #: local delta-ISS radius (the comparison bound is global: inf)
     tube_radius: float = math.inf  #: R of assumption A2 (global MLP bounds: inf)
     policy: str | None = None  #: path of a trained policy (.npz); relative to the spec
+    architecture: str = "mlp"  #: "mlp" | "residual" (structure + K x + Lipschitz-bounded MLP)
+    lipschitz_budget: float = math.inf  #: product of the residual MLP's layer norms (residual)
+    max_heldout_gap: float = math.inf  #: train fails (exit 1) when the held-out mean gap exceeds
     given: frozenset[str] = field(default=frozenset(), compare=False, repr=False)
 
     KEYS = MappingProxyType(
@@ -607,6 +610,9 @@ class TasilSettings:
             "eta": "local delta-ISS radius",
             "tube_radius": "radius R of assumption A2",
             "policy": "path of a trained policy (.npz), relative to the spec",
+            "architecture": "policy class: 'mlp', or 'residual' = [policy] structure + K x + MLP",
+            "lipschitz_budget": "bound on the residual MLP's product of layer spectral norms",
+            "max_heldout_gap": "training fails when the held-out mean gap exceeds this",
         }
     )
 
@@ -633,6 +639,9 @@ class TasilSettings:
             eta=r.get("eta", positive_or_inf, d["eta"]),
             tube_radius=r.get("tube_radius", positive_or_inf, d["tube_radius"]),
             policy=r.get("policy", string, d["policy"], example="policy.npz"),
+            architecture=r.get("architecture", one_of, d["architecture"], ("mlp", "residual")),
+            lipschitz_budget=r.get("lipschitz_budget", positive_or_inf, d["lipschitz_budget"]),
+            max_heldout_gap=r.get("max_heldout_gap", positive_or_inf, d["max_heldout_gap"]),
             given=r.given,
         )
 

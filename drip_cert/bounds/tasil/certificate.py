@@ -202,6 +202,7 @@ def tasil_certificate(
     method: str = "tasil-1",
     continuous: bool = False,
     comparison_gain: float | None = None,
+    uniform_h0: float | None = None,
 ) -> TasilCertificate:
     """Build the TaSIL certificate (docs/math/tasil.md sections 3-4; DRIP Theorem ``thm:TaSIL``
     shape).
@@ -238,6 +239,13 @@ def tasil_certificate(
         proved to contract at ``lambda_IL`` on all of ``R^n``: then every gap also obeys the
         comparison bound ``gap <= comparison_gain * h_0`` (docs/math/tasil.md section 3.7), with
         no condition on ``h_1``, ``L_Delta`` or the tube; the smaller bound is used.
+    uniform_h0
+        With ``comparison_gain``: a sound upper bound of ``sup_{x in S} ||pi_IL(x) - pi*(x)||``
+        over a set ``S`` proved to contain every expert trajectory from the support on ``[0, T]``.
+        Then ``gap(xi) <= comparison_gain * uniform_h0`` for EVERY initial state of the support
+        (docs/math/tasil.md section 3.8): the form ``"uniform"``, holding with probability 1. A
+        sure bound needs no union bound: ``rho`` is the smaller of it and the chosen form's
+        radius (when that holds), and the deterministic ``gap_bound`` takes it too.
 
     Returns
     -------
@@ -295,11 +303,16 @@ def tasil_certificate(
             not imitation_gap_lemma(a, b, gamma0, L, eta, R).holds for a, b in zip(all0, all1)
         )
     gap_bound, route = lem.bound, "lemma"
+    uni = math.inf
+    if cg is not None and uniform_h0 is not None:
+        uni = up_closed_form(cg * positive("uniform_h0", uniform_h0, allow_zero=True))
     if cg is not None:
         # every state's gap <= cg h0_i <= cg max h0 (section 3.7): valid whatever the lemma says
         gap_cmp = up_closed_form(cg * float(all0.max()))
         if gap_cmp < gap_bound:
             gap_bound, route = gap_cmp, "comparison"
+        if uni < gap_bound:
+            gap_bound, route = uni, "uniform"
     where = "training" if worst < n else "held-out"
     idx = worst if worst < n else worst - n
     gap_reason = (
@@ -327,9 +340,22 @@ def tasil_certificate(
     else:
         for name in ("threshold", "expectation", "drip_shaped"):
             forms.append(TasilForm(name, math.inf, False, True, "not computed: no class constants"))
+    if math.isfinite(uni):
+        forms.append(
+            TasilForm(
+                "uniform",
+                uni,
+                True,
+                False,
+                f"every initial state of the support: gap <= sup||g||_2/lambda_IL * "
+                f"sup_S ||pi_IL - pi*|| = {cg:.6g} * {uniform_h0:.6g} (probability 1)",
+            )
+        )
     chosen = next(f for f in forms if f.name == use)
     ok = chosen.holds and not chosen.vacuous and math.isfinite(chosen.value)
     rho = chosen.value if ok else math.inf
+    if uni < rho:  # a sure bound: min with it needs no union bound
+        rho, use = uni, "uniform"
     vac = tuple(f.name for f in forms if f.vacuous or not f.holds)
     return TasilCertificate(
         method=method,

@@ -35,7 +35,7 @@ __all__ = [
     "rho_tasil",
 ]
 
-FORMS = ("held_out", "threshold", "expectation", "drip_shaped")
+FORMS = ("held_out", "threshold", "expectation", "drip_shaped", "uniform")
 _SOURCE = "docs/math/tasil.md section 3 (this project's construction)"
 # size of the geometric grid tau_j in {b_j 2^{-k/2}: k = 0..K-1} used when tau is data-chosen
 _TAU_GRID_SIZE = 64

@@ -87,6 +87,7 @@ def tasil_section(
     speed_sound: bool = False,
     method: str = "tasil-1",
     comparison_gain: Quantity | None = None,
+    uniform_h0: Quantity | None = None,
 ) -> tuple[TasilCertificate, dict[str, Any], tuple[Quantity, ...]]:
     """The TaSIL certificate of ``s.learned`` (docs/math/tasil.md sections 3-4).
 
@@ -111,6 +112,9 @@ def tasil_section(
     comparison_gain
         ``sup||g||_2 / lambda_IL`` when the learned closed loop is proved to contract on all of
         ``R^n`` (never an estimate): the comparison bound of docs/math/tasil.md section 3.7.
+    uniform_h0
+        With ``comparison_gain``: a sound bound of ``sup ||pi_IL - pi*||`` over a set proved to
+        contain every expert trajectory from the support; gives the sure form ``"uniform"``.
 
     Returns
     -------
@@ -206,6 +210,7 @@ def tasil_section(
         method=method,
         continuous=True,
         comparison_gain=None if comparison_gain is None else comparison_gain.value,
+        uniform_h0=None if uniform_h0 is None else uniform_h0.value,
     )
     if comparison_gain is not None:
         provenance["comparison_gain"] = comparison_gain.to_dict()
@@ -214,6 +219,9 @@ def tasil_section(
         )
         if used:  # the TaSIL check then rests on it (and on the learned loop's rate)
             qs.append(comparison_gain)
+        if uniform_h0 is not None and cert.rho_form == "uniform":
+            provenance["uniform_h0"] = uniform_h0.to_dict()
+            qs.append(uniform_h0)
     provenance["h_how"] = how_t.value
     h_note = (
         "continuous-time sup along the expert trajectories (docs/math/tasil.md section 4)"

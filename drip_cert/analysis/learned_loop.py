@@ -1,0 +1,338 @@
+"""Global contraction of a learned closed loop that is affine in MLP blocks (L1-DRAC Assumption 2).
+
+L1-DRAC needs the nominal closed loop ``F(x) = f(x) + g pi_IL(x)`` to contract on all of ``R^n``
+(the true SDE leaves every bounded set with positive probability), so a rate proved on a box does
+not serve it. For a neural policy a box branch and bound cannot reach infinity; two routes here do,
+whenever the expressions are affine in MLP blocks (docs/math/contraction.md section 6):
+
+Route "lipschitz-affine-mlp" (the loop itself).
+    If ``F(x) = A x + c + sum_k C_k h_k(x)`` with constant ``A, c, C_k`` and MLPs ``h_k``, then
+    ``J(x) = A + sum_k C_k Dh_k(x)`` and, by subadditivity of the log norm and
+    ``mu_2(M) <= ||M||_2``,
+
+        mu_2(J(x)) <= mu_2(A) + sum_k ||C_k||_2 ||Dh_k(x)||_2 <= mu_2(A) + sum_k ||C_k||_2 L_k,
+
+    with ``L_k`` a certified Lipschitz constant of ``h_k`` (``||Dh_k(x)||_2 <= L_k`` for all x).
+    Every x, every t: the rate ``lambda = -(that bound)`` is global.
+
+Route "perturbation-of-expert" (the issue's ``lambda_IL >= lambda* - ||g|| sup ||D Delta||``).
+    With ``g`` constant and ``Delta = pi_IL - pi*`` affine in MLP blocks, ``Delta(x) = A_D x + c_D
+    + sum_k C_k h_k(x)``, the learned Jacobian is ``J_IL = J* + g D Delta``, so
+
+        mu_2(J_IL) <= mu_2(J*) + ||g||_2 ||D Delta(x)||_2
+                   <= -lambda* + ||g||_2 (||A_D||_2 + sum_k ||C_k||_2 L_k),
+
+    global whenever the expert's rate ``lambda*`` is (blocks shared by ``pi_IL`` and ``pi*``
+    cancel in ``Delta`` before its coefficients are read).
+
+Floating point: the coefficients are read from sympy with ``float()`` (within
+:data:`~drip_cert.analysis.closed_loop.CONVERSION_ULPS` spacings of the true ones); ``mu_2(A)``
+is bounded in Arb (:func:`~drip_cert.analysis.lognorm.mu2_constant_bounds`) and widened by the
+Frobenius norm of the conversion radius (Weyl); norms are rigorous upper bounds and every sum and
+product is rounded up. The Lipschitz constants come from
+:func:`~drip_cert.analysis.mlp_bounds.lipschitz_bound` (the smaller of the layer product and the
+verified LipSDP bound), with their own provenance: the rate's ``how`` is derived from them.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+
+import numpy as np
+import sympy as sp
+
+from drip_cert.analysis.closed_loop import CONVERSION_ULPS, AffineBlocks, affine_in_blocks
+from drip_cert.analysis.contraction import ContractionResult
+from drip_cert.analysis.lognorm import mu2_constant_bounds
+from drip_cert.analysis.mlp_bounds import enclose_output, lipschitz_bound
+from drip_cert.model.system import System
+from drip_cert.numerics.bnb import maximize
+from drip_cert.numerics.rounding import (
+    add_down_np,
+    add_up,
+    add_up_np,
+    matmul_bounds,
+    mul_up,
+    norm2_up_np,
+    spectral_norm_upper,
+    sub_down_np,
+    up_np,
+)
+from drip_cert.provenance import GLOBAL, How, Quantity
+
+__all__ = [
+    "GlobalRate",
+    "lipschitz_rate",
+    "perturbation_rate",
+    "best_global_rate",
+    "sup_policy_difference",
+]
+
+
+@dataclass(frozen=True)
+class GlobalRate:
+    """A contraction rate on all of ``R^n`` (and all t) with the pieces of its bound.
+
+    Attributes
+    ----------
+    result
+        The rate as a :class:`~drip_cert.analysis.contraction.ContractionResult` (``method`` names
+        the route; ``how`` derived from the inputs).
+    rate
+        The rate as a :class:`~drip_cert.provenance.Quantity` ``lambda`` (its ``how`` and
+        ``scope`` computed from the inputs below).
+    inputs
+        The quantities the bound rests on (``mu_2(A)`` or ``lambda*``, norms, Lipschitz
+        constants).
+    """
+
+    result: ContractionResult
+    rate: Quantity
+    inputs: tuple[Quantity, ...]
+
+
+def _conversion_radius(M: np.ndarray) -> float:
+    """Frobenius norm (rounded up) of the radius of the float conversion of the coefficients."""
+    rad = CONVERSION_ULPS * np.spacing(np.abs(np.asarray(M, dtype=float))).ravel()
+    return float(norm2_up_np(rad))
+
+
+def _norm_up(M: np.ndarray) -> float:
+    """``||M_true||_2 <= ||M||_2 + ||E||_F`` for the converted coefficients ``M``."""
+    return add_up(float(spectral_norm_upper(np.asarray(M, dtype=float))), _conversion_radius(M))
+
+
+def _blocks_sum(s: System, dec: AffineBlocks) -> tuple[float, list[Quantity]] | None:
+    """``sum_k ||C_k||_2 L_k`` rounded up, and the Lipschitz quantities; ``None`` when a block is
+    not an MLP (no certified Lipschitz constant)."""
+    total = 0.0
+    lips: list[Quantity] = []
+    for name, C in dec.C.items():
+        mlp = s.blocks[name].mlp
+        if mlp is None:
+            return None
+        cands = [lipschitz_bound(mlp, "product")]
+        try:
+            cands.append(lipschitz_bound(mlp, "lipsdp"))
+        except Exception:  # noqa: BLE001 - the SDP solver may fail; the product bound stays
+            pass
+        sound = [q for q in cands if q.how != How.ESTIMATE and math.isfinite(q.value)]
+        if not sound:
+            return None
+        L = min(sound, key=lambda q: q.value).renamed(f"Lip({name})")
+        lips.append(L)
+        if np.any(C):
+            total = add_up(total, mul_up(_norm_up(C), L.value))
+    return total, lips
+
+
+def _result(rate: Quantity, method: str, note: str, t0: float) -> ContractionResult:
+    return ContractionResult(
+        rate=rate.value,
+        how=rate.how,
+        method=method,
+        scope=rate.scope,
+        max_mu_upper=-rate.value,
+        max_mu_sampled=math.nan,
+        witness=None,
+        tolerance=math.nan,
+        n_boxes=0,
+        time_s=time.perf_counter() - t0,
+        note=note,
+    )
+
+
+def lipschitz_rate(s: System, which: str = "learned") -> GlobalRate | None:
+    """Route "lipschitz-affine-mlp": ``lambda >= -(mu_2(A) + sum_k ||C_k||_2 L_k)`` on all x, t.
+
+    ``None`` when the closed loop is not affine in MLP blocks applied to the whole state, depends
+    on ``t``, or has no policy ``which``.
+    """
+    t0 = time.perf_counter()
+    if which == "learned" and s.learned is None:
+        return None
+    dec = affine_in_blocks(s.closed_loop(which), s)
+    if dec is None:
+        return None
+    parts = _blocks_sum(s, dec)
+    if parts is None:
+        return None
+    total, lips = parts
+    _, mu_hi = mu2_constant_bounds(dec.A)
+    mu_a = Quantity.derive(
+        "mu_2(A)",
+        add_up(mu_hi, _conversion_radius(dec.A)),
+        method=How.SOUND,
+        source="log norm of the linear part, Arb (docs/math/contraction.md section 6)",
+    )
+    upper = add_up(mu_a.value, total)
+    rate = Quantity.derive(
+        "lambda",
+        -upper,
+        inputs=[mu_a, *lips],
+        method=How.SOUND,
+        source="DRIP Assumption 2 / L1-DRAC Assumption 2, Euclidean log norm",
+        note="lipschitz-affine-mlp on all x, all t: mu_2(J) <= mu_2(A) + sum ||C_k|| Lip(h_k)",
+        scope=GLOBAL,
+    )
+    note = (
+        f"mu_2(A) <= {mu_a.value:.6g}, sum_k ||C_k|| Lip(h_k) <= {total:.6g} "
+        f"({', '.join(f'{q.name} <= {q.value:.4g}' for q in lips) or 'no blocks'})"
+    )
+    return GlobalRate(_result(rate, "lipschitz-affine-mlp", note, t0), rate, (mu_a, *lips))
+
+
+def perturbation_rate(s: System, expert_rate: Quantity) -> GlobalRate | None:
+    """Route "perturbation-of-expert": ``lambda_IL >= lambda* - ||g||_2 sup_x ||D(pi_IL - pi*)||``.
+
+    Needs a constant ``g``, a global (exact or sound) ``expert_rate`` and ``pi_IL - pi*`` affine in
+    MLP blocks; ``None`` otherwise.
+    """
+    t0 = time.perf_counter()
+    if s.learned is None or s.g.free_symbols:
+        return None
+    if expert_rate.how == How.ESTIMATE or not expert_rate.scope.all_x:
+        return None
+    if not expert_rate.scope.all_t or not math.isfinite(expert_rate.value):
+        return None
+    delta = sp.ImmutableMatrix(s.learned - s.expert)
+    dec = affine_in_blocks(delta, s)
+    if dec is None:
+        return None
+    parts = _blocks_sum(s, dec)
+    if parts is None:
+        return None
+    total, lips = parts
+    g = np.array(s.g.tolist(), dtype=float)
+    g_norm = Quantity.derive(
+        "||g||_2", _norm_up(g), method=How.SOUND, source="spectral norm of the constant g"
+    )
+    d_norm = Quantity.derive(
+        "sup||D(pi_IL - pi*)||",
+        add_up(_norm_up(dec.A), total),
+        inputs=lips,
+        method=How.SOUND,
+        source="||A_Delta|| + sum_k ||C_k|| Lip(h_k), all x",
+    )
+    value = expert_rate.value - mul_up(g_norm.value, d_norm.value)
+    # lambda* - (rounded-up product) can round up in the subtraction: step one ulp down
+    value = float(np.nextafter(value, -np.inf))
+    rate = Quantity.derive(
+        "lambda",
+        value,
+        inputs=[expert_rate, g_norm, d_norm],
+        method=How.SOUND,
+        source="DRIP Assumption 2 / L1-DRAC Assumption 2, Euclidean log norm",
+        note="perturbation-of-expert on all x, all t: lambda_IL >= lambda* - ||g|| sup||D Delta||",
+        scope=GLOBAL,
+    )
+    note = (
+        f"lambda* = {expert_rate.value:.6g}, ||g||_2 <= {g_norm.value:.6g}, "
+        f"sup||D(pi_IL - pi*)|| <= {d_norm.value:.6g}"
+    )
+    return GlobalRate(
+        _result(rate, "perturbation-of-expert", note, t0), rate, (expert_rate, g_norm, d_norm)
+    )
+
+
+def best_global_rate(s: System, expert_rate: Quantity | None) -> GlobalRate | None:
+    """The larger proved rate of the two routes (``None`` when neither applies)."""
+    cands = [lipschitz_rate(s, "learned")]
+    if expert_rate is not None:
+        cands.append(perturbation_rate(s, expert_rate))
+    ok = [c for c in cands if c is not None and math.isfinite(c.rate.value)]
+    return max(ok, key=lambda c: c.rate.value) if ok else None
+
+
+#: relative tolerance of the branch and bound on sup ||pi_IL - pi*|| (a 10 % looser h0 is a 10 %
+#: looser rho_TaSIL; tighter costs boxes exponentially in n)
+SUP_DIFF_RTOL = 0.1
+SUP_DIFF_MAX_BOXES = 20000
+SUP_DIFF_MAX_TIME_S = 10.0
+
+
+def _affine_enclosure(s: System, dec: AffineBlocks, lo: np.ndarray, hi: np.ndarray):
+    """Rigorous ``(lo, hi)`` of ``A x + c + sum_k C_k h_k(x)`` over the box ``[lo, hi]``
+    (centre-radius products rounded outward, the coefficient conversion radius included)."""
+
+    def lin(M: np.ndarray, vlo: np.ndarray, vhi: np.ndarray):
+        m = 0.5 * vlo + 0.5 * vhi
+        r = up_np(np.maximum(vhi - m, m - vlo))
+        clo, chi = matmul_bounds(M, m[:, None])
+        rad = matmul_bounds(np.abs(M), r[:, None])[1][:, 0]
+        vabs = np.maximum(np.abs(vlo), np.abs(vhi))
+        conv = matmul_bounds(CONVERSION_ULPS * np.spacing(np.abs(M)), vabs[:, None])[1][:, 0]
+        rad = add_up_np(rad, conv)
+        return sub_down_np(clo[:, 0], rad), add_up_np(chi[:, 0], rad)
+
+    c = np.asarray(dec.c, dtype=float)
+    rc = CONVERSION_ULPS * np.spacing(np.abs(c))
+    olo, ohi = lin(dec.A, lo, hi)
+    olo, ohi = sub_down_np(add_down_np(olo, c), rc), add_up_np(add_up_np(ohi, c), rc)
+    for name, C in dec.C.items():
+        mlp = s.blocks[name].mlp
+        assert mlp is not None  # checked by the caller
+        hlo, hhi = enclose_output(mlp, lo, hi)
+        a, b = lin(C, hlo, hhi)
+        olo, ohi = add_down_np(olo, a), add_up_np(ohi, b)
+    return olo, ohi
+
+
+def sup_policy_difference(s: System, box: np.ndarray) -> Quantity | None:
+    """Sound upper bound of ``sup_{x in box} ||pi_IL(x) - pi*(x)||_2`` by branch and bound.
+
+    ``pi_IL - pi*`` must be affine in MLP blocks (shared blocks cancel first); each sub-box is
+    enclosed by interval bound propagation through the networks and centre-radius products, the
+    norm of the enclosure rounded up. ``None`` when the difference has another form.
+    """
+    if s.learned is None:
+        return None
+    dec = affine_in_blocks(sp.ImmutableMatrix(s.learned - s.expert), s)
+    if dec is None or any(s.blocks[b].mlp is None for b in dec.C):
+        return None
+    box = np.asarray(box, dtype=float)
+    parts = _blocks_sum(s, dec)
+    # global Lipschitz constant of the difference: ||A|| + sum ||C_k|| Lip(h_k) (mean-value form)
+    lip = math.inf if parts is None else add_up(_norm_up(dec.A), parts[0])
+    lips = [] if parts is None else parts[1]
+
+    def upper(B: np.ndarray) -> float:
+        lo, hi = _affine_enclosure(s, dec, B[:, 0], B[:, 1])
+        ub = float(norm2_up_np(np.maximum(np.abs(lo), np.abs(hi))))
+        if math.isfinite(lip):
+            # ||D(x)|| <= ||D(c)|| + Lip ||x - c|| on the box, D(c) enclosed at the point c
+            c = 0.5 * B[:, 0] + 0.5 * B[:, 1]
+            clo, chi = _affine_enclosure(s, dec, c, c)
+            rad = float(norm2_up_np(up_np(np.maximum(B[:, 1] - c, c - B[:, 0]))))
+            at_c = float(norm2_up_np(np.maximum(np.abs(clo), np.abs(chi))))
+            ub = min(ub, add_up(at_c, mul_up(lip, rad)))
+        return ub
+
+    def value(x: np.ndarray) -> float:
+        d = dec.A @ x + dec.c
+        for name, C in dec.C.items():
+            mlp = s.blocks[name].mlp
+            assert mlp is not None
+            d = d + C @ mlp.apply_np(x[None, :])[0]
+        return float(np.linalg.norm(d))
+
+    res = maximize(
+        box,
+        upper,
+        value,
+        rtol=SUP_DIFF_RTOL,
+        max_boxes=SUP_DIFF_MAX_BOXES,
+        max_time_s=SUP_DIFF_MAX_TIME_S,
+        corners=True,
+    )
+    return Quantity.derive(
+        "sup||pi_IL - pi*||",
+        res.upper,
+        inputs=lips,
+        method=How.SOUND,
+        source="interval branch and bound over the box (analysis/learned_loop.py)",
+        note=f"over {box.tolist()}: <= {res.upper:.6g} (sampled {res.lower:.6g}, "
+        f"{res.n_boxes} boxes)",
+    )
