@@ -3,7 +3,7 @@
 L1-DRAC needs the nominal closed loop ``F(x) = f(x) + g pi_IL(x)`` to contract on all of ``R^n``
 (the true SDE leaves every bounded set with positive probability), so a rate proved on a box does
 not serve it. For a neural policy a box branch and bound cannot reach infinity; two routes here do,
-whenever the expressions are affine in MLP blocks (docs/math/contraction.md section 6):
+whenever the expressions are affine in MLP blocks (docs/math/contraction.md section 9):
 
 Route "lipschitz-affine-mlp" (the loop itself).
     If ``F(x) = A x + c + sum_k C_k h_k(x)`` with constant ``A, c, C_k`` and MLPs ``h_k``, then
@@ -165,7 +165,7 @@ def lipschitz_rate(s: System, which: str = "learned") -> GlobalRate | None:
         "mu_2(A)",
         add_up(mu_hi, _conversion_radius(dec.A)),
         method=How.SOUND,
-        source="log norm of the linear part, Arb (docs/math/contraction.md section 6)",
+        source="log norm of the linear part, Arb (docs/math/contraction.md section 9)",
     )
     upper = add_up(mu_a.value, total)
     rate = Quantity.derive(

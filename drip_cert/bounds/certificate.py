@@ -29,8 +29,9 @@ from drip_cert.analysis.constants import (
 )
 from drip_cert.analysis.contraction import ContractionResult, contraction_rate
 from drip_cert.analysis.coordinates import CoordinateChange, coordinates_from_metric
-from drip_cert.analysis.invariance import InvariantSet, best_invariant_set
+from drip_cert.analysis.invariance import InvariantSet, best_invariant_set, invariant_box
 from drip_cert.analysis.iss import delta_iss
+from drip_cert.analysis.learned_loop import best_global_rate, sup_policy_difference
 from drip_cert.bounds.l1drac.system import l1_section
 from drip_cert.errors import AssumptionViolation, DripCertError
 from drip_cert.model.system import System, box_image
@@ -836,8 +837,6 @@ def _learned_contraction(
     """The learned loop's rate: first the global routes for loops affine in MLP blocks
     (:mod:`drip_cert.analysis.learned_loop`; L1-DRAC needs all of R^n), then, when they prove
     nothing, the configured route on the contraction region (a box result)."""
-    from drip_cert.analysis.learned_loop import best_global_rate
-
     g = best_global_rate(s, lam_ex)
     if g is not None and g.result.holds and g.result.how != How.ESTIMATE:
         notes.append(
@@ -858,9 +857,6 @@ def _uniform_h0(s: System, r: Any, inv: InvariantSet | None, notes: list[str]) -
     expert trajectory from the support on ``[0, T]``: the support itself when it is forward
     invariant (Nagumo), else the box around a proved invariant ball; ``None`` when neither is
     proved or the difference is not affine in MLP blocks."""
-    from drip_cert.analysis.invariance import invariant_box
-    from drip_cert.analysis.learned_loop import sup_policy_difference
-
     support = np.asarray(s.support, dtype=float)
     enclose = block_enclose_callback(s.blocks) if s.blocks else None
     S = None

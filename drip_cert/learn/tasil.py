@@ -308,7 +308,9 @@ def train_policy(
     lr_args = (jnp.asarray(float(settings.lr)), jnp.asarray(float(settings.steps)))
     params: Any = [(jnp.asarray(w), jnp.asarray(b)) for w, b in mlp0.params()]
     if settings.skip:
-        params = _skip_init(params, demos.state_dim, demos.input_dim)
+        params = _skip_init(
+            params, demos.states[:, :-1][train_idx], demos.actions[:, :-1][train_idx]
+        )
     params = net.project(params)
     opt_state = _adam(*lr_args, settings.schedule).init(params)
     key = jax.random.PRNGKey(seed)
@@ -406,9 +408,17 @@ class _Net:
         return (out, K) if self.skip else out
 
 
-def _skip_init(layers, n: int, m: int):
-    """``(layers, K)`` with ``K = 0``: the linear term is learned like every other weight."""
-    return layers, jnp.zeros((m, n))
+def _skip_init(layers, states, actions):
+    """``(layers, K)``: ``K`` from the least-squares fit ``u ~ K x + c`` of the training pairs
+    (``c`` added to the output bias); the network starts at its seeded initialisation, so the
+    policy starts as that fit plus the network's initial output."""
+    X = np.asarray(states, dtype=float).reshape(-1, np.shape(states)[-1])
+    U = np.asarray(actions, dtype=float).reshape(-1, np.shape(actions)[-1])
+    A = np.hstack([X, np.ones((X.shape[0], 1))])
+    coef = np.linalg.lstsq(A, U, rcond=None)[0]  # (n + 1, m)
+    K, c = coef[:-1].T, coef[-1]
+    w_last, b_last = layers[-1]
+    return [*layers[:-1], (w_last, b_last + jnp.asarray(c))], jnp.asarray(K)
 
 
 def _adam(lr, total_steps, schedule: str) -> optax.GradientTransformation:
