@@ -32,6 +32,7 @@ from drip_cert.analysis.coordinates import CoordinateChange, coordinates_from_me
 from drip_cert.analysis.invariance import InvariantSet, best_invariant_set, invariant_box
 from drip_cert.analysis.iss import delta_iss
 from drip_cert.analysis.learned_loop import best_global_rate, sup_policy_difference
+from drip_cert.analysis.mlp_loop import system_mlps
 from drip_cert.bounds.l1drac.system import l1_section
 from drip_cert.errors import AssumptionViolation, DripCertError
 from drip_cert.model.system import System, box_image
@@ -99,6 +100,7 @@ def analyse_contraction(s: System, which: str, opts: ContractionSettings) -> Con
         tol=opts.tol,
         max_boxes=opts.max_boxes,
         max_time_s=opts.max_time,
+        mlps=system_mlps(s) or None,
     )
     metric, err = None, ""
     if opts.metric:
