@@ -372,7 +372,8 @@ def test_designer_returns_verified_interior_points() -> None:
     allowed = set(backoff.backoff_factors())
     n = 0
     for c, p, omega, ls, rr, ra, _ in float_root_cases(7, N_DESIGNS):
-        d = design(c, DesignRequest(p=p, omega=omega, lambda_s=ls))
+        # objective "min_rho": Ts found (the largest (24) allows) and backed off, as tested here
+        d = design(c, DesignRequest(p=p, omega=omega, lambda_s=ls, objective="min_rho"))
         assert d.feasible and d.verified, d.reason
         assert [r.eq for r in d.conditions] == list(V.CONDITIONS)
         assert all(r.verified and r.margin_lo > 0.0 and r.holds for r in d.conditions)
@@ -412,7 +413,8 @@ def test_design_label_is_computed_from_inputs() -> None:
 
 
 def test_json_keeps_old_keys_and_adds_the_verified_margins() -> None:
-    d = design(di_constants(), DesignRequest(p=2, lambda_s=100.0, omega=1e3, delta=0.01))
+    req = DesignRequest(p=2, lambda_s=100.0, omega=1e3, delta=0.01, objective="min_rho")
+    d = design(di_constants(), req)  # "min_rho": Ts found, so backed off too
     js = d.to_dict()
     old = ("feasible", "p", "omega", "lambda_s", "Ts", "rho_r", "rho_a", "rho", "kappa", "delta")
     for k in (*old, "conditions", "reason", "notes", "how", "tolerance", "seconds"):

@@ -469,7 +469,8 @@ class L1Settings:
     ``None`` means "let the designer find it" (``lambda_s``, ``omega``, ``Ts``, ``rho_r``,
     ``rho_a``), "no kappa" (``delta``), "the distance of the supports of D and D_bar"
     (``alpha``) or "Assumption 8 holds when L_f is finite" (``lip_f``). ``p_star`` defaults to
-    ``p``.
+    ``p``. ``objective`` ``None`` is inferred: ``"rho_at_Ts"`` with ``Ts``, ``"Ts_at_rho"``
+    with ``rho_budget``, else ``"default"`` (:func:`l1_objective`).
     """
 
     p: int = 1
@@ -484,6 +485,9 @@ class L1Settings:
     eps_r: float = 1e-3  #: slack of (16a)
     eps_a: float = 1e-3  #: slack of (16b)
     lip_f: bool | None = None
+    objective: str | None = None  #: None: inferred from Ts / rho_budget (see L1_OBJECTIVES)
+    rho_budget: float | None = None  #: largest acceptable rho = rho_r + rho_a
+    front: bool = True  #: compute the (Ts, rho) Pareto front
     given: frozenset[str] = field(default=frozenset(), compare=False, repr=False)
 
     KEYS = MappingProxyType(
@@ -500,12 +504,20 @@ class L1Settings:
             "eps_r": "slack of (16a)",
             "eps_a": "slack of (16b)",
             "lip_f": "whether L1-DRAC Assumption 8 is used",
+            "objective": 'what the design optimises: "default" (the smallest rho at Ts = '
+            '1e-3 s, else the largest Ts of the front that is not a knife edge), "rho_at_Ts" '
+            '(Ts given), "Ts_at_rho" (rho_budget given) or "min_rho" (the infimum of rho)',
+            "rho_budget": "largest acceptable rho = rho_r + rho_a of (17)",
+            "front": "compute the (Ts, rho) Pareto front of verified designs",
         }
     )
 
     def __post_init__(self) -> None:
         if self.p_star is None:
             object.__setattr__(self, "p_star", self.p)
+        if self.objective is None:  # the one the values imply (as from_table)
+            obj = l1_objective(None, Ts=self.Ts, rho_budget=self.rho_budget)
+            object.__setattr__(self, "objective", obj)
 
     @classmethod
     def from_table(
@@ -543,12 +555,78 @@ class L1DesignValues(TypedDict):
     rho_r: float | None
     rho_a: float | None
     delta: float | None
+    objective: str | None
+    rho_budget: float | None
+    front: bool
+
+
+#: The L1-DRAC design objectives; their meanings are documented at
+#: :data:`drip_cert.bounds.l1drac.request.OBJECTIVES`.
+L1_OBJECTIVES = ("default", "rho_at_Ts", "Ts_at_rho", "min_rho")
+
+
+def l1_objective(
+    objective: str | None,
+    *,
+    Ts: float | None,
+    rho_budget: float | None,
+    rho_r: float | None = None,
+    rho_a: float | None = None,
+    table: str = "l1drac",
+    path: str | None = None,
+) -> str:
+    """The L1-DRAC design objective: ``objective``, or the one the given values imply when it is
+    ``None`` (``"rho_at_Ts"`` with ``Ts``, ``"Ts_at_rho"`` with ``rho_budget``, else
+    ``"default"``). Raises SpecError (field ``table.objective`` or ``table.rho_budget``) for a
+    combination the objective cannot serve, with the fix."""
+
+    def err(msg: str, key: str = "objective") -> SpecError:
+        return SpecError(msg, field=f"{table}.{key}", path=path)
+
+    obj = objective
+    if obj is None:
+        obj = (
+            "rho_at_Ts" if Ts is not None else "Ts_at_rho" if rho_budget is not None else "default"
+        )
+    if obj not in L1_OBJECTIVES:
+        raise err(
+            f"objective = {toml_text(obj)} is not one of "
+            + ", ".join(toml_text(o) for o in L1_OBJECTIVES)
+            + '; write e.g. objective = "rho_at_Ts" together with Ts, or remove the key'
+        )
+    if obj == "rho_at_Ts" and Ts is None:
+        raise err('objective = "rho_at_Ts" needs the sampling period: give Ts (e.g. Ts = 1e-3)')
+    if obj == "Ts_at_rho" and (rho_budget is None or Ts is not None):
+        raise err(
+            'objective = "Ts_at_rho" needs rho_budget and no Ts (Ts is what it finds): give '
+            'rho_budget and remove Ts, or write objective = "rho_at_Ts"'
+        )
+    if obj in ("default", "min_rho") and Ts is not None:
+        raise err(
+            f"objective = {toml_text(obj)} finds Ts, but Ts = {toml_text(Ts)} is given: remove "
+            'Ts, or write objective = "rho_at_Ts"'
+        )
+    if obj in ("default", "min_rho") and rho_budget is not None:
+        raise err(
+            f"objective = {toml_text(obj)} takes no rho_budget: remove it, or write objective "
+            '= "Ts_at_rho"'
+        )
+    if rho_budget is not None and rho_r is not None and rho_a is not None:
+        if rho_r + rho_a > rho_budget:
+            raise err(
+                f"rho_budget = {toml_text(rho_budget)} is below the given rho_r + rho_a = "
+                f"{toml_text(rho_r + rho_a)}: raise rho_budget or lower the radii",
+                "rho_budget",
+            )
+    return obj
 
 
 def read_l1_design(r: TableReader) -> L1DesignValues:
     """The L1-DRAC design parameters of a table, ``None`` where absent: ``lambda_s``, ``omega``,
-    ``Ts``, ``rho_r``, ``rho_a`` (finite numbers > 0; absent = let the designer find it) and
-    ``delta`` (a probability in (0, 1); absent = no kappa).
+    ``Ts``, ``rho_r``, ``rho_a`` (finite numbers > 0; absent = let the designer find it),
+    ``delta`` (a probability in (0, 1); absent = no kappa), ``rho_budget`` (> 0), ``front``
+    (a boolean) and ``objective`` (one of :data:`L1_OBJECTIVES`, checked against the others by
+    :func:`l1_objective`; absent = inferred).
 
     Shared by ``[l1drac]`` of a spec (:class:`L1Settings`) and ``[design]`` of a ``design-l1``
     constants file (:mod:`drip_cert.bounds.l1drac.toml`), whose keys mean the same
@@ -558,14 +636,27 @@ def read_l1_design(r: TableReader) -> L1DesignValues:
     def positive(key: str, example: float) -> float | None:
         return r.get(key, positive_float, None, example=example)
 
-    return {  # read in this order (the order of the error messages)
+    out: L1DesignValues = {  # read in this order (the order of the error messages)
         "lambda_s": positive("lambda_s", 10.0),
         "omega": positive("omega", 50.0),
         "Ts": positive("Ts", 1e-3),
         "rho_r": positive("rho_r", 1.0),
         "rho_a": positive("rho_a", 1.0),
         "delta": r.get("delta", probability, None, example=0.05),
+        "objective": r.get("objective", one_of, None, L1_OBJECTIVES),
+        "rho_budget": positive("rho_budget", 100.0),
+        "front": r.get("front", boolean, True),
     }
+    out["objective"] = l1_objective(
+        out["objective"],
+        Ts=out["Ts"],
+        rho_budget=out["rho_budget"],
+        rho_r=out["rho_r"],
+        rho_a=out["rho_a"],
+        table=r.name,
+        path=r.path,
+    )
+    return out
 
 
 # ------------------------------------------------------------------------------ [tasil]
@@ -776,6 +867,8 @@ __all__ = [
     "positive_or_inf",
     "probability",
     "read_l1_design",
+    "L1_OBJECTIVES",
+    "l1_objective",
     "read_real",
     "string",
 ]

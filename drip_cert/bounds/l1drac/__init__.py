@@ -20,7 +20,9 @@ One concept per module; each imports only the modules above it in this list:
 * :mod:`~drip_cert.bounds.l1drac.backoff` -- the move of a float design into the interior.
 * :mod:`~drip_cert.bounds.l1drac.result` -- :class:`L1Design`, the designer's result.
 * :mod:`~drip_cert.bounds.l1drac.radii` -- Theorem 4.1: p for delta, kappa, the ultimate bound.
-* :mod:`~drip_cert.bounds.l1drac.designer` -- :func:`design` and :func:`tradeoff_table`.
+* :mod:`~drip_cert.bounds.l1drac.solve` -- the searches at one objective (``solve``).
+* :mod:`~drip_cert.bounds.l1drac.designer` -- :func:`design` (the objectives),
+  :func:`pareto_front`, :func:`knife_edge` and :func:`tradeoff_table`.
 * :mod:`~drip_cert.bounds.l1drac.toml` -- a ``design-l1`` constants file.
 * :mod:`~drip_cert.bounds.l1drac.system` -- the constants of a System and the certificate's
   L1-DRAC section.
@@ -40,10 +42,16 @@ from drip_cert.bounds.l1drac.conditions import (
     evaluate_conditions,
 )
 from drip_cert.bounds.l1drac.constants import CONSTANT_NAMES, L1Constants
-from drip_cert.bounds.l1drac.designer import TradeoffRow, design, tradeoff_table
+from drip_cert.bounds.l1drac.designer import (
+    TradeoffRow,
+    design,
+    knife_edge,
+    pareto_front,
+    tradeoff_table,
+)
 from drip_cert.bounds.l1drac.radii import kappa_markov, p_for_delta, ultimate_bound
-from drip_cert.bounds.l1drac.request import DesignRequest
-from drip_cert.bounds.l1drac.result import L1Design
+from drip_cert.bounds.l1drac.request import OBJECTIVES, PRACTICAL_TS, DesignRequest
+from drip_cert.bounds.l1drac.result import FrontPoint, L1Design
 from drip_cert.bounds.l1drac.searches import ROOT_RTOL, largest_Ts, smallest_rho_a, smallest_rho_r
 from drip_cert.bounds.l1drac.verify import VERIFY_METHOD
 
@@ -69,6 +77,11 @@ __all__ = [
     "smallest_rho_a",
     "largest_Ts",
     "design",
+    "pareto_front",
+    "knife_edge",
+    "FrontPoint",
+    "OBJECTIVES",
+    "PRACTICAL_TS",
     "tradeoff_table",
     "p_for_delta",
     "kappa_markov",

@@ -12,8 +12,28 @@ from typing import Any
 
 from drip_cert.bounds.l1drac.constants import check_int, check_real
 from drip_cert.errors import SpecError
+from drip_cert.spec.settings import L1_OBJECTIVES, l1_objective
 
-__all__ = ["DesignRequest"]
+__all__ = ["DesignRequest", "OBJECTIVES", "PRACTICAL_TS"]
+
+#: What a design optimises (:attr:`DesignRequest.objective`):
+#:
+#: * ``"rho_at_Ts"`` -- ``Ts`` given (the hardware's sampling period): the smallest rho.
+#: * ``"Ts_at_rho"`` -- ``rho_budget`` given: the largest ``Ts`` with ``rho <= rho_budget``.
+#: * ``"default"`` -- neither given: the smallest rho at :data:`PRACTICAL_TS` when a design
+#:   there is verified and not a knife edge, else the largest-``Ts`` point of the (Ts, rho) front
+#:   that is not a knife edge (:func:`~drip_cert.bounds.l1drac.designer.knife_edge`).
+#: * ``"min_rho"`` -- the smallest radii over every free parameter, then the largest ``Ts``
+#:   (24) allows with them: the infimum of rho, a knife edge whenever rho_a is found ((21b)
+#:   binds and leaves (24) almost no room; with omega free it also sits at the top of the
+#:   omega interval, Remarks 3.1-3.2). The designer's only objective before issue 14.
+OBJECTIVES = L1_OBJECTIVES
+
+#: The practical sampling period of the ``"default"`` objective, in seconds: 1 kHz, the rate of
+#: common embedded control loops (and of the paper-4d simulation's ``dt``), well inside what a
+#: microcontroller samples. A design is sought here first; a faster ``Ts`` is accepted only when
+#: 1 kHz is infeasible, and then with a note.
+PRACTICAL_TS = 1e-3
 
 
 def _positive(name: str, value: Any) -> float:
@@ -42,6 +62,18 @@ class DesignRequest:
     omega_bounds, lambda_s_bounds
         Search intervals ``(lo, hi)``; default ``(1e-3, 1e7) * lambda`` and
         ``(1e-3, 1e5) * lambda``.
+    objective
+        One of :data:`OBJECTIVES`; ``None`` = inferred: ``"rho_at_Ts"`` when ``Ts`` is given,
+        ``"Ts_at_rho"`` when ``rho_budget`` is given, else ``"default"``. ``"rho_at_Ts"`` needs
+        ``Ts``; ``"Ts_at_rho"`` needs ``rho_budget`` and no ``Ts``.
+    rho_budget
+        Largest acceptable rho = rho_r + rho_a (17). With ``Ts`` given too, a design whose rho
+        exceeds it is infeasible (reason given).
+    practical_Ts
+        The ``Ts`` the ``"default"`` objective tries first (:data:`PRACTICAL_TS`).
+    front
+        Compute the (Ts, rho) Pareto front (:func:`~drip_cert.bounds.l1drac.designer.
+        pareto_front`) and attach it to the design; ``False`` skips it (a faster design).
     """
 
     p: int
@@ -53,10 +85,15 @@ class DesignRequest:
     delta: float | None = None
     omega_bounds: tuple[float, float] | None = None
     lambda_s_bounds: tuple[float, float] | None = None
+    objective: str | None = None
+    rho_budget: float | None = None
+    practical_Ts: float = PRACTICAL_TS
+    front: bool = True
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "p", check_int("design.p", self.p, where="the design", path=None))
-        for name in ("lambda_s", "omega", "Ts", "rho_r", "rho_a", "delta"):
+        object.__setattr__(self, "practical_Ts", _positive("practical_Ts", self.practical_Ts))
+        for name in ("lambda_s", "omega", "Ts", "rho_r", "rho_a", "delta", "rho_budget"):
             value = getattr(self, name)
             object.__setattr__(self, name, None if value is None else _positive(name, value))
         if self.delta is not None and not self.delta < 1.0:
@@ -74,3 +111,16 @@ class DesignRequest:
             if not lo < hi:
                 raise SpecError(f"{b!r}: need lo < hi", field="design." + name)
             object.__setattr__(self, name, (lo, hi))
+        self._check_objective()
+
+    def _check_objective(self) -> None:
+        """Infer ``objective`` when ``None``; reject combinations it cannot serve."""
+        obj = l1_objective(
+            self.objective,
+            Ts=self.Ts,
+            rho_budget=self.rho_budget,
+            rho_r=self.rho_r,
+            rho_a=self.rho_a,
+            table="design",
+        )
+        object.__setattr__(self, "objective", obj)

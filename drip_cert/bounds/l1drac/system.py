@@ -11,7 +11,9 @@ time-varying ones they are sampled estimates. User inputs: ``p`` (default 1), ``
 ``omega``, ``Ts``, ``rho_r``, ``rho_a``, ``delta``, ``alpha`` (default 0: the identity coupling
 ``D = D_bar``; otherwise the largest distance between the two support boxes, a sound bound on any
 coupling's ``W_{2p}``), ``eps_r``, ``eps_a`` (default 1e-3, the slacks of (16)), ``p_star``
-(default ``p``), and any constant override in ``[constants]``.
+(default ``p``), the objective (``objective``, ``rho_budget``; default: the smallest rho at
+``Ts`` = 1e-3 s, see :func:`~drip_cert.bounds.l1drac.designer.design`), ``front`` (the
+(Ts, rho) Pareto front, on ``design.front``), and any constant override in ``[constants]``.
 """
 
 from __future__ import annotations
@@ -180,6 +182,9 @@ def l1_section(
         rho_r=st.rho_r,
         rho_a=st.rho_a,
         delta=st.delta,
+        objective=st.objective,
+        rho_budget=st.rho_budget,
+        front=st.front,
     )
     d = design(consts, req)
     rows: tuple[TradeoffRow, ...] = ()

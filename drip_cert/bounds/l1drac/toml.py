@@ -23,6 +23,12 @@ File format (two flat tables, nothing else)::
     delta = 1e-3         # optional: report kappa (130a)
     omega_min = 0.01     # optional: search interval of omega when omega is omitted
     omega_max = 1e8
+    rho_budget = 50.0    # optional: the largest acceptable rho (objective "Ts_at_rho")
+    objective = "default"  # optional: "default", "rho_at_Ts", "Ts_at_rho", "min_rho"
+                         # (omitted: "rho_at_Ts" with Ts, "Ts_at_rho" with rho_budget, else
+                         # "default" = the smallest rho at Ts = 1e-3 s, else the largest Ts of
+                         # the (Ts, rho) front that is not a knife edge)
+    front = true         # optional: compute the (Ts, rho) Pareto front (default true)
 
 Every mistake (unknown or missing key, wrong type, NaN/inf, negative value) raises
 :class:`~drip_cert.errors.SpecError` naming the file, the field, the value and the fix. A failing
@@ -31,6 +37,7 @@ Assumption 7 raises :class:`~drip_cert.errors.AssumptionViolation` (exit status 
 
 from __future__ import annotations
 
+import dataclasses
 import tomllib
 from functools import partial
 from pathlib import Path
@@ -58,7 +65,18 @@ DESIGN_KEYS = MappingProxyType(
     {
         **{
             k: L1Settings.KEYS[k]
-            for k in ("p", "lambda_s", "omega", "Ts", "rho_r", "rho_a", "delta")
+            for k in (
+                "p",
+                "lambda_s",
+                "omega",
+                "Ts",
+                "rho_r",
+                "rho_a",
+                "delta",
+                "objective",
+                "rho_budget",
+                "front",
+            )
         },
         "omega_min": "lower end of the omega search interval",
         "omega_max": "upper end of the omega search interval",
@@ -148,16 +166,29 @@ def load_l1_constants(path: str | Path) -> tuple[L1Constants, DesignRequest]:
     return consts, req
 
 
-def design_l1_report(path: str | Path) -> dict[str, Any]:
+def design_l1_report(
+    path: str | Path, *, Ts: float | None = None, rho_budget: float | None = None
+) -> dict[str, Any]:
     """Load ``path``, design, and return the JSON-ready report the CLI prints.
 
     Keys: those of :meth:`~drip_cert.bounds.l1drac.result.L1Design.to_dict` (``feasible``
     decides the exit status: 0 if true, 1 if false; it is true only when every condition is
     verified in Arb ball arithmetic, see ``verified``, ``backoff`` and each condition's
-    ``margin_lo`` / ``margin_hi``) plus ``file``, ``constants`` and ``request``. Bad input
-    raises SpecError (exit 2).
+    ``margin_lo`` / ``margin_hi``; ``objective``, ``choice``, ``knife_edge`` and ``front`` say
+    what was optimised, why this point, and the (Ts, rho) Pareto front) plus ``file``,
+    ``constants`` and ``request``. ``Ts`` and ``rho_budget`` (the CLI's ``--Ts`` and
+    ``--rho-budget``) replace the file's values; the objective is then re-inferred unless the
+    file names one. Bad input raises SpecError (exit 2).
     """
     consts, req = load_l1_constants(path)
+    if Ts is not None or rho_budget is not None:
+        changes: dict[str, Any] = {}
+        if Ts is not None:
+            changes["Ts"] = Ts
+        if rho_budget is not None:
+            changes["rho_budget"] = rho_budget
+        explicit = _file_objective(path)
+        req = dataclasses.replace(req, objective=explicit, **changes)
     d = design(consts, req)
     out = d.to_dict()
     out["file"] = str(path)
@@ -171,5 +202,15 @@ def design_l1_report(path: str | Path) -> dict[str, Any]:
         "rho_a": req.rho_a,
         "delta": req.delta,
         "omega_bounds": None if req.omega_bounds is None else list(req.omega_bounds),
+        "objective": req.objective,
+        "rho_budget": req.rho_budget,
+        "front": req.front,
     }
     return out
+
+
+def _file_objective(path: str | Path) -> str | None:
+    """The ``objective`` the file's ``[design]`` writes, or None (then it is inferred)."""
+    with open(path, "rb") as fh:
+        obj = tomllib.load(fh).get("design", {}).get("objective")
+    return obj if isinstance(obj, str) else None
