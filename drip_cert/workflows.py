@@ -29,9 +29,15 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from drip_cert.errors import SpecError
+from drip_cert.figures_l1 import l1_front_figure
 from drip_cert.numerics.atomic_io import atomic_write_json, atomic_write_text, jsonable
 from drip_cert.progress import Stages
-from drip_cert.report import certificate_markdown, reproduce_figure, reproduce_markdown
+from drip_cert.report import (
+    certificate_markdown,
+    reproduce_figure,
+    reproduce_markdown,
+    write_validation_outputs,
+)
 from drip_cert.spec import load_spec
 from drip_cert.spec.load import Spec
 
@@ -99,6 +105,8 @@ def run_pipeline(
     practical_ts: float | None = None,
     simulation: Mapping[str, Any] | None = None,
     progress: bool = False,
+    backend: Any = None,
+    policy_dtype: str = "float64",
 ) -> PipelineResult:
     """Train -> certify -> simulate -> validate, with one seed and one set of demonstrations.
 
@@ -129,6 +137,9 @@ def run_pipeline(
         Overrides of ``[simulation]`` settings for this run (e.g. ``dt``, ``Ts``).
     progress
         Stages, training steps and simulation progress on stderr.
+    backend, policy_dtype
+        Where the Monte Carlo runs (:class:`~drip_cert.sim.backend.Backend`; no number changes)
+        and the opt-in float32 policy path; passed to :func:`~drip_cert.validate.validate`.
     """
     from drip_cert.learn.imitation import (  # jax: keep off the CLI start-up path
         demonstration_set,
@@ -202,6 +213,8 @@ def run_pipeline(
                     practical_ts=practical_ts,
                     horizon=horizon,
                     progress=progress,
+                    backend=backend,
+                    policy_dtype=policy_dtype,
                 )
             )
             timings[f"validate_{n}_s"] = time.perf_counter() - t0
@@ -456,12 +469,16 @@ def validate_spec(
     practical_ts: float | None = None,
     quick: bool = False,
     progress: bool = False,
+    backend: Any = None,
+    policy_dtype: str = "float64",
 ) -> ValidationReport:
     """``drip-cert validate``: certify the spec's system and validate it by simulation.
 
     A spec without a learned policy gets one trained with its ``[tasil]`` settings (the same
     demonstrations then feed the certificate). ``trajectories`` is the number of simulated
-    paths; ``out`` receives ``validation.json`` and the simulation (atomically).
+    paths; ``out`` receives ``validation.json``, ``validation.md`` and ``validation.png``
+    (:func:`~drip_cert.report.write_validation_outputs`) and the simulation (atomically).
+    ``backend`` and ``policy_dtype``: see :func:`run_pipeline`.
     """
     spec = load_spec(spec_path)
     tasil = {"steps": min(spec.settings.tasil.steps, 300)} if quick else None
@@ -473,12 +490,59 @@ def validate_spec(
         horizon=min(spec.system.horizon, 2.0) if quick else None,
         practical_ts=practical_ts,
         progress=progress,
+        backend=backend,
+        policy_dtype=policy_dtype,
     )
     rep = run.validations[0].with_notes_before(run.notes)
     if out is not None:
         out = Path(out)
         rep.result.save(out / "simulation")
         atomic_write_json(out / "validation.json", rep.to_dict())
+        write_validation_outputs(rep, out)  # validation.md and validation.png beside the JSON
+    return rep
+
+
+def validate_recorded(
+    spec_path: str | Path,
+    data: str | Path,
+    *,
+    out: str | Path | None = None,
+    progress: bool = False,
+) -> ValidationReport:
+    """``drip-cert validate SPEC --data FILE``: recorded data against the spec's certificate.
+
+    The data are read and checked first (:func:`~drip_cert.validate.data.load_recorded`; shape,
+    dimension and horizon errors come before the seconds of certification), then the spec's
+    system, with its own learned policy (the one that produced the data; nothing is trained), is
+    certified and the data are compared with the certificate with the statistics of the
+    simulated validation (:func:`~drip_cert.validate.data.validate_data`). ``out`` receives
+    ``validation.json``, ``validation.md`` and ``validation.png`` (atomically).
+    """
+    from drip_cert.validate.data import (  # scipy.stats: keep off the CLI start-up path
+        check_fits,
+        load_recorded,
+        validate_data,
+    )
+
+    spec = load_spec(spec_path)
+    s = spec.system
+    recorded = load_recorded(data)
+    check_fits(recorded, n_state=s.n, certified_horizon=s.horizon)
+    if s.learned is None:
+        raise SpecError(
+            "recorded data are checked against the certificate of the policy that produced "
+            "them: give it in [policy] learned (e.g. the `use_in_spec` lines of `drip-cert "
+            "train`)",
+            field="policy.learned",
+        )
+    run = run_pipeline(spec, train=False, certify=True, progress=progress)
+    assert run.certificate is not None  # certify=True
+    rep = validate_data(
+        run.certificate, recorded, n_state=s.n, certified_horizon=s.horizon
+    ).with_notes_before(run.notes)
+    if out is not None:
+        atomic_write_json(Path(out) / "validation.json", rep.to_dict())
+        write_validation_outputs(rep, out)  # validation.md and validation.png beside the JSON
     return rep
 
 
@@ -502,9 +566,17 @@ class ReproduceSettings:
 
 
 def reproduce(
-    name: str, *, out: str | Path, quick: bool = False, seed: int = 0, progress: bool = True
+    name: str,
+    *,
+    out: str | Path,
+    quick: bool = False,
+    seed: int = 0,
+    progress: bool = True,
+    backend: Any = None,
+    policy_dtype: str = "float64",
 ) -> dict[str, Any]:
-    """``drip-cert reproduce paper-4d``; see the module docstring."""
+    """``drip-cert reproduce paper-4d``; see the module docstring (``backend``,
+    ``policy_dtype``: see :func:`run_pipeline`)."""
     t_start = time.perf_counter()
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -521,6 +593,8 @@ def reproduce(
         horizon=rs.horizon,
         simulation={"dt": rs.dt, "Ts": max(sim.Ts, 5 * rs.dt)},
         progress=progress,
+        backend=backend,
+        policy_dtype=policy_dtype,
     )
     cert = run.certificate
     assert cert is not None  # certify=True
@@ -542,6 +616,8 @@ def reproduce(
     fig_paths = reproduce_figure(
         res, paper.result, cert, out, at_certified=ours.at_certified_parameters
     )
+    if cert.l1 is not None and cert.l1.design is not None and cert.l1.design.front:
+        fig_paths = [*fig_paths, l1_front_figure(cert.l1.design, out / "l1_front.png")]
     validation = {}
     for k, v in runs.items():
         d = v.to_dict()

@@ -29,6 +29,7 @@ LAYERS: dict[str, int] = {
     "progress": 1,
     "_jax": 2,
     "numerics": 2,
+    "schema": 2,  # the output layouts (JSON Schema files) and their loader
     "model": 3,
     "spec": 4,
     "analysis": 5,
@@ -38,8 +39,12 @@ LAYERS: dict[str, int] = {
     "sim": 6,
     "validate": 7,
     "workflows": 8,
+    "deploy": 8,
     "report": 8,
+    "figures_l1": 8,
+    "diff": 8,
     "cli": 9,
+    "testing": 9,  # the pytest plugin, beside the command line
     "__main__": 10,
     "": 10,  # drip_cert/__init__.py: the lazy public re-exports
 }
@@ -50,6 +55,7 @@ SAME_LAYER_ALLOWED: set[tuple[str, str]] = {
     ("provenance", "errors"),
     ("numerics", "_jax"),
     ("workflows", "report"),
+    ("workflows", "figures_l1"),
 }
 
 
@@ -256,6 +262,8 @@ HEAVY: tuple[str, ...] = (
     "matplotlib",
     "scipy.optimize",
     "scipy.stats",
+    "dask",
+    "distributed",
 )
 
 #: the justification a function-local import carries on its line: ``# jax: <why>``
