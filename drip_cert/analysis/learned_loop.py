@@ -46,7 +46,8 @@ import sympy as sp
 from drip_cert.analysis.closed_loop import CONVERSION_ULPS, AffineBlocks, affine_in_blocks
 from drip_cert.analysis.contraction import ContractionResult
 from drip_cert.analysis.lognorm import mu2_constant_bounds
-from drip_cert.analysis.mlp_bounds import enclose_output, lipschitz_bound
+from drip_cert.analysis.mlp_bounds import enclose_jacobian, enclose_output, lipschitz_bound
+from drip_cert.analysis.policy_regularity import difference_jacobian_lipschitz
 from drip_cert.model.system import System
 from drip_cert.numerics.bnb import maximize
 from drip_cert.numerics.rounding import (
@@ -280,6 +281,28 @@ def _affine_enclosure(s: System, dec: AffineBlocks, lo: np.ndarray, hi: np.ndarr
     return olo, ohi
 
 
+def _difference_jacobian_at(s: System, dec: AffineBlocks, c: np.ndarray):
+    """Rigorous ``(lo, hi)`` of ``D Delta(c) = A + sum_k C_k Dh_k(c)`` at the point ``c``."""
+    A = np.asarray(dec.A, dtype=float)
+    ra = CONVERSION_ULPS * np.spacing(np.abs(A))
+    jlo, jhi = sub_down_np(A, ra), add_up_np(A, ra)
+    for name, C in dec.C.items():
+        mlp = s.blocks[name].mlp
+        assert mlp is not None
+        hlo, hhi = enclose_jacobian(mlp, c, c)
+        m = 0.5 * hlo + 0.5 * hhi
+        rr = up_np(np.maximum(hhi - m, m - hlo))
+        plo, phi = matmul_bounds(C, m)
+        rad = matmul_bounds(np.abs(C), rr)[1]
+        conv = matmul_bounds(
+            CONVERSION_ULPS * np.spacing(np.abs(C)), np.maximum(abs(hlo), abs(hhi))
+        )
+        rad = add_up_np(rad, conv[1])
+        jlo = sub_down_np(add_down_np(jlo, plo), rad)
+        jhi = add_up_np(add_up_np(jhi, phi), rad)
+    return jlo, jhi
+
+
 def sup_policy_difference(s: System, box: np.ndarray) -> Quantity | None:
     """Sound upper bound of ``sup_{x in box} ||pi_IL(x) - pi*(x)||_2`` by branch and bound.
 
@@ -297,17 +320,31 @@ def sup_policy_difference(s: System, box: np.ndarray) -> Quantity | None:
     # global Lipschitz constant of the difference: ||A|| + sum ||C_k|| Lip(h_k) (mean-value form)
     lip = math.inf if parts is None else add_up(_norm_up(dec.A), parts[0])
     lips = [] if parts is None else parts[1]
+    l2q = difference_jacobian_lipschitz(s)  # Lipschitz constant of D Delta (global), or None
+    l2 = math.inf if l2q is None or l2q.how == How.ESTIMATE else l2q.value
+    if l2q is not None and math.isfinite(l2):
+        lips = [*lips, l2q]
 
     def upper(B: np.ndarray) -> float:
         lo, hi = _affine_enclosure(s, dec, B[:, 0], B[:, 1])
         ub = float(norm2_up_np(np.maximum(np.abs(lo), np.abs(hi))))
+        c = 0.5 * B[:, 0] + 0.5 * B[:, 1]
+        r = up_np(np.maximum(B[:, 1] - c, c - B[:, 0]))
+        if not (math.isfinite(lip) or math.isfinite(l2)):
+            return ub
+        clo, chi = _affine_enclosure(s, dec, c, c)
         if math.isfinite(lip):
-            # ||D(x)|| <= ||D(c)|| + Lip ||x - c|| on the box, D(c) enclosed at the point c
-            c = 0.5 * B[:, 0] + 0.5 * B[:, 1]
-            clo, chi = _affine_enclosure(s, dec, c, c)
-            rad = float(norm2_up_np(up_np(np.maximum(B[:, 1] - c, c - B[:, 0]))))
+            # first order: ||D(x)|| <= ||D(c)|| + Lip ||x - c||, D(c) enclosed at the point c
             at_c = float(norm2_up_np(np.maximum(np.abs(clo), np.abs(chi))))
-            ub = min(ub, add_up(at_c, mul_up(lip, rad)))
+            ub = min(ub, add_up(at_c, mul_up(lip, float(norm2_up_np(r)))))
+        if math.isfinite(l2):
+            # second order: D(x) = D(c) + DD(c)(x - c) + E, ||E|| <= L2/2 ||x - c||^2; the linear
+            # part's range over the box is exact per component: D(c)_i +- sum_j |DD(c)_ij| r_j
+            jlo, jhi = _difference_jacobian_at(s, dec, c)
+            spread = matmul_bounds(np.maximum(np.abs(jlo), np.abs(jhi)), r[:, None])[1][:, 0]
+            lin = np.maximum(np.abs(sub_down_np(clo, spread)), np.abs(add_up_np(chi, spread)))
+            rem = mul_up(0.5 * l2, float(norm2_up_np(r)) ** 2 * (1.0 + 4.0 * 2.0**-52))
+            ub = min(ub, add_up(float(norm2_up_np(lin)), rem))
         return ub
 
     def value(x: np.ndarray) -> float:
