@@ -1,4 +1,4 @@
-"""Command line: ``drip-cert {check-spec, certify, design-l1, train, validate, reproduce}``.
+"""Command line: ``drip-cert {check-spec, certify, design-l1, train, validate, reproduce, diff}``.
 
 Thin by design: parse arguments, call library functions, print. Exit status 0 = certified /
 holds / feasible, 1 = not certified / violated / infeasible (with the reason), 2 = bad input or
@@ -15,11 +15,14 @@ from collections.abc import Callable, Sequence
 from typing import Any
 
 from drip_cert.bounds.l1drac.toml import design_l1_report
+from drip_cert.diff import DEFAULT_RTOL, diff_files, diff_text
 from drip_cert.errors import AssumptionViolation, DripCertError, SpecError
+from drip_cert.figures_l1 import l1_front_figure
 from drip_cert.numerics.atomic_io import jsonable
 from drip_cert.report import certificate_markdown, l1_design_text, train_text, validation_text
+from drip_cert.sim.backend import Backend
 from drip_cert.spec import load_spec
-from drip_cert.workflows import reproduce, train_from_spec, validate_spec
+from drip_cert.workflows import reproduce, train_from_spec, validate_recorded, validate_spec
 
 
 def _print_json(obj: Any) -> None:
@@ -73,7 +76,9 @@ def cmd_certify(args: argparse.Namespace) -> int:
 
 
 def cmd_design_l1(args: argparse.Namespace) -> int:
-    report = design_l1_report(args.constants)
+    report = design_l1_report(args.constants, Ts=args.Ts, rho_budget=args.rho_budget)
+    if args.figure:
+        report["figure"] = str(l1_front_figure(report, args.figure))
     if args.json:
         _print_json(report)
     else:
@@ -105,15 +110,20 @@ def cmd_train(args: argparse.Namespace) -> int:
 
 
 def cmd_validate(args: argparse.Namespace) -> int:
-    report = validate_spec(
-        args.spec,
-        trajectories=args.trajectories,
-        seed=args.seed,
-        out=args.out,
-        practical_ts=args.practical_ts,
-        quick=args.quick,
-        progress=not args.json,
-    )
+    if args.data is not None:
+        report = validate_recorded(args.spec, args.data, out=args.out, progress=not args.json)
+    else:
+        report = validate_spec(
+            args.spec,
+            trajectories=args.trajectories,
+            seed=args.seed,
+            out=args.out,
+            practical_ts=args.practical_ts,
+            quick=args.quick,
+            progress=not args.json,
+            backend=_backend(args),
+            policy_dtype=args.policy_dtype,
+        )
     if args.json:
         _print_json(report.to_dict())
     else:
@@ -122,9 +132,24 @@ def cmd_validate(args: argparse.Namespace) -> int:
     return 0 if report.status == "holds" else 1
 
 
+def cmd_diff(args: argparse.Namespace) -> int:
+    res = diff_files(args.old, args.new, rtol=args.rtol)
+    if args.json:
+        _print_json(res.to_dict())
+    else:
+        print(diff_text(res))
+    return res.exit_status  # 1 on a regression
+
+
 def cmd_reproduce(args: argparse.Namespace) -> int:
     report = reproduce(
-        args.name, out=args.out, quick=args.quick, seed=args.seed, progress=not args.json
+        args.name,
+        out=args.out,
+        quick=args.quick,
+        seed=args.seed,
+        progress=not args.json,
+        backend=_backend(args),
+        policy_dtype=args.policy_dtype,
     )
     if args.json:
         _print_json(report)
@@ -160,6 +185,22 @@ def build_parser() -> argparse.ArgumentParser:
     q = sub.add_parser("design-l1", help="L1-DRAC parameter feasibility from a constants file")
     q.add_argument("constants")
     q.add_argument("--json", action="store_true")
+    q.add_argument(
+        "--Ts",
+        type=float,
+        default=None,
+        help="the hardware's sampling period [s]: the smallest rho at this T_s (replaces the "
+        "file's Ts)",
+    )
+    q.add_argument(
+        "--rho-budget",
+        type=float,
+        default=None,
+        help="the largest acceptable rho: the largest T_s with rho <= this",
+    )
+    q.add_argument(
+        "--figure", default=None, metavar="PATH", help="write the (T_s, rho) Pareto front here"
+    )
     q.set_defaults(func=cmd_design_l1)
 
     q = sub.add_parser("train", help="train an imitation policy (TaSIL or BC)")
@@ -207,7 +248,15 @@ def build_parser() -> argparse.ArgumentParser:
         help="simulate at this T_s when the certified one is impractically small",
     )
     q.add_argument("--quick", action="store_true")
+    q.add_argument(
+        "--data",
+        default=None,
+        metavar="FILE",
+        help="check recorded trajectories or gap series (.npz or .csv, docs/data_format.md) "
+        "instead of simulating; --trajectories, --seed, --practical-ts, --quick do not apply",
+    )
     q.add_argument("--json", action="store_true")
+    _add_simulation_options(q)
     q.set_defaults(func=cmd_validate)
 
     q = sub.add_parser("reproduce", help="reproduce a paper experiment end to end")
@@ -216,8 +265,66 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("--quick", action="store_true")
     q.add_argument("--seed", type=int, default=0)
     q.add_argument("--json", action="store_true")
+    _add_simulation_options(q)
     q.set_defaults(func=cmd_reproduce)
+
+    q = sub.add_parser(
+        "diff",
+        help="compare two certificates (or validation reports); exit 1 on a regression",
+        description="Verdict changes, bounds loosened or tightened beyond --rtol, margins that "
+        "changed sign, constants whose provenance weakened (exact > sound > given > estimate); "
+        "for validation reports also check statuses. Exit 1 on a regression, 0 otherwise.",
+    )
+    q.add_argument("old", help="the baseline: certify --json or validation.json output")
+    q.add_argument("new", help="the output to compare with it (same kind)")
+    q.add_argument(
+        "--rtol",
+        type=_nonneg_float,
+        default=DEFAULT_RTOL,
+        help=f"relative tolerance of a bound change (default {DEFAULT_RTOL:g})",
+    )
+    q.add_argument("--json", action="store_true")
+    q.set_defaults(func=cmd_diff)
     return p
+
+
+def _add_simulation_options(q: argparse.ArgumentParser) -> None:
+    """``--backend``, ``--scheduler`` and ``--policy-dtype`` of the commands that simulate."""
+    q.add_argument(
+        "--backend",
+        choices=["local", "dask"],
+        default="local",
+        help="where the Monte Carlo runs: this process, or one task per chunk on Dask (a "
+        "LocalCluster unless --scheduler or DASK_SCHEDULER_ADDRESS names one); same numbers",
+    )
+    q.add_argument(
+        "--scheduler",
+        default=None,
+        metavar="ADDRESS",
+        help="Dask scheduler address (tcp://host:8786) for --backend dask",
+    )
+    q.add_argument(
+        "--policy-dtype",
+        choices=["float64", "float32"],
+        default="float64",
+        help="arithmetic of the learned policy in the simulation (float32: faster, its effect "
+        "on the gaps is measured and reported; the certificate stays float64)",
+    )
+
+
+def _backend(args: argparse.Namespace) -> Backend:
+    """The :class:`~drip_cert.sim.backend.Backend` of ``--backend`` / ``--scheduler``."""
+    return Backend(args.backend, args.scheduler)
+
+
+def _nonneg_float(text: str) -> float:
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number >= 0, got {text!r}") from None
+    if not (v >= 0 and v != float("inf")):
+        raise argparse.ArgumentTypeError(f"expected a finite number >= 0, got {text!r}")
+    return v
 
 
 def _posint(text: str) -> int:

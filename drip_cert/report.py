@@ -6,6 +6,10 @@ import math
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
+from drip_cert.numerics.atomic_io import atomic_write_text
+
 
 def _f(x: Any, digits: int = 6) -> str:
     if x is None:
@@ -153,7 +157,41 @@ def l1_design_text(rep: dict[str, Any]) -> str:
         ]
     if rep.get("reason"):
         lines += ["", f"reason: {rep['reason']}"]
+    lines += _l1_objective_lines(rep)
     return "\n".join(lines)
+
+
+def _l1_objective_lines(rep: dict[str, Any]) -> list[str]:
+    """The objective, why this point, the knife-edge verdict and the (Ts, rho) Pareto front of
+    an L1-DRAC design report (keys ``objective``, ``choice``, ``knife_edge``, ``front``)."""
+    lines: list[str] = []
+    if rep.get("objective"):
+        lines += ["", f"objective: {rep['objective']}"]
+        if rep.get("rho_budget") is not None:
+            lines[-1] += f" (rho_budget = {_f(rep['rho_budget'])})"
+    if rep.get("choice"):
+        lines.append(f"chosen: {rep['choice']}")
+    ke = rep.get("knife_edge") or {}
+    if ke.get("is"):
+        lines.append(f"KNIFE EDGE: {ke.get('reason', '')}")
+    front = rep.get("front") or []
+    if front:
+        lines += [
+            "",
+            "(T_s, rho) Pareto front (every point a design verified in Arb; rho increases "
+            "with T_s):",
+            "",
+            "| T_s [s] | rho | rho_r | rho_a | omega | lambda_s | verified | knife edge | source |",
+            "|---|---|---|---|---|---|---|---|---|",
+        ]
+        for pt in front:
+            lines.append(
+                f"| {_f(pt['Ts'], 3)} | {_f(pt['rho'])} | {_f(pt['rho_r'])} | "
+                f"{_f(pt['rho_a'])} | {_f(pt['omega'])} | {_f(pt['lambda_s'])} | "
+                f"{_f(pt['verified'])} | {'yes' if pt.get('knife_edge') else 'no'} | "
+                f"{pt.get('source', '')} |"
+            )
+    return lines
 
 
 def _validation_table(checks: list[dict[str, Any]]) -> list[str]:
@@ -375,3 +413,223 @@ def train_text(summary: dict[str, Any], out: str) -> str:
             )
         )
     return "\n".join(lines)
+
+
+# ------------------------------------------------------------------ validation report + figure
+#: the gaps drawn in the validation figure: (gap, label, certified bound key of ``rho``, what the
+#: bound is about); a gap the run does not have (recorded data without those processes) is left out
+_VALIDATION_PANELS: tuple[tuple[str, str, str, str], ...] = (
+    (
+        "policy",
+        "policy gap E||x'_t - x*_t|| (learned vs expert, nominal)",
+        "rho_tasil",
+        "rho_TaSIL: (1 - delta) radius of max_t ||x'_t - x*_t|| (checked as policy_radius)",
+    ),
+    (
+        "uncertainty_l1",
+        "uncertainty gap E||X_t - x'_t|| (learned + L1-DRAC on the true system vs nominal)",
+        "rho_l1",
+        "rho_L1: certified bound on ||X_t - x'_t||_{L_2p} >= E||X_t - x'_t||",
+    ),
+    (
+        "total_l1",
+        "total gap E||X_t - x*_t|| (learned + L1-DRAC on the true system vs expert)",
+        "rho_total",
+        "rho = rho_TaSIL + rho_L1 (the paper's total; information, see total_tail)",
+    ),
+)
+
+LOG_SCALE_RATIO = 20.0
+"""A panel whose certified bound is more than this many times the largest gap (upper confidence
+end) is drawn on a log axis, so that both are readable."""
+
+VALIDATION_FILES = ("validation.json", "validation.md", "validation.png")
+"""What ``drip-cert validate --out DIR`` writes into ``DIR`` (with ``simulation/`` for a
+simulated run)."""
+
+
+def _parameters_label(rep: dict[str, Any]) -> str:
+    """The at / NOT at certified parameters sentence of a validation report."""
+    p = rep.get("l1_parameters") or {}
+    values = ", ".join(
+        f"{k} = {_f(p[k], 4)}" for k in ("omega", "lambda_s", "Ts") if p.get(k) is not None
+    )
+    if rep.get("at_certified_parameters"):
+        return "L1-DRAC at the certified parameters" + (f" ({values})" if values else "")
+    return (
+        "L1-DRAC NOT at the certified parameters"
+        + (f" (run at {values})" if values else "")
+        + ": its results do not validate the certificate's L1-DRAC part"
+    )
+
+
+def _source_label(rep: dict[str, Any]) -> str:
+    sim = rep.get("simulation") or {}
+    if sim.get("source") == "recorded data":
+        return f"recorded data {sim.get('file', '')} ({sim.get('n_paths', '?')} paths)".replace(
+            "  ", " "
+        )
+    n = sim.get("n_paths_done")
+    return "Monte-Carlo simulation" + (f" ({n} paths)" if n is not None else "")
+
+
+def validation_markdown(rep: dict[str, Any], figure: str | None = "validation.png") -> str:
+    """Markdown rendering of a validation report (:meth:`ValidationReport.to_dict`).
+
+    Status and the at / NOT at certified parameters line first, then the certificate's verdict
+    and bounds, the figure (``figure``: a path relative to the Markdown file, ``None`` for none),
+    every check (bound, empirical, one-sided confidence bound, ratio, status), the largest
+    empirical gaps with their confidence intervals, and the notes.
+    """
+    cert = rep.get("certificate") or {}
+    name = (cert.get("system") or {}).get("name", "")
+    status = rep.get("status", "nothing_checked")
+    label = {"holds": "HOLDS", "violated": "VIOLATED", "nothing_checked": "NOTHING CHECKED"}
+    counts = rep.get("counts") or {}
+    rho = cert.get("rho") or {}
+    lines = [
+        f"# drip-cert validation: {name}",
+        "",
+        f"**{label.get(status, status.upper())}** ({counts.get('holds', 0)} hold, "
+        f"{counts.get('violated', 0)} violated, {counts.get('not_checked', 0)} not checked) "
+        f"against {_source_label(rep)} on [0, {_f(rep.get('horizon'), 4)}] s.",
+        "",
+        f"**{_parameters_label(rep)}.**",
+        "",
+        f"Certificate: {str(cert.get('verdict', 'n/a')).upper()}; rho_TaSIL = "
+        f"{_f(rho.get('rho_tasil'))}, rho_L1 = {_f(rho.get('rho_l1'))}, rho = "
+        f"{_f(rho.get('rho_total'))} (certified horizon T = "
+        f"{_f(rep.get('certified_horizon'), 4)} s).",
+    ]
+    if status == "violated":
+        bad = [c["name"] for c in rep.get("checks", []) if c.get("status") == "violated"]
+        lines += ["", f"Violated: {', '.join(bad) or 'see the short-horizon run'}."]
+    if figure:
+        lines += ["", f"![empirical gaps against the certified bounds]({figure})"]
+    lines += ["", "## Checks", ""]
+    lines += _validation_table(rep.get("checks", []))
+    short = rep.get("short_horizon_at_certified_parameters")
+    if short:
+        lines += ["", f"### {short.get('note', 'short horizon')} ({short.get('paths')} paths)", ""]
+        lines += _validation_table(short.get("checks", []))
+    emp = rep.get("empirical") or {}
+    rows = [(k, v) for k, v in emp.items() if isinstance(v, dict) and "value" in v]
+    if rows:
+        lines += [
+            "",
+            "## Largest mean gaps",
+            "",
+            "| gap | max_t mean | confidence interval | at t |",
+            "|---|---|---|---|",
+        ]
+        lines += [
+            f"| {k} | {_f(v.get('value'))} | [{_f(v.get('ci_low'))}, {_f(v.get('ci_high'))}] | "
+            f"{_f(v.get('argmax_time'), 4)} |"
+            for k, v in rows
+        ]
+    if rep.get("notes"):
+        lines += ["", "## Notes", ""] + [f"* {n}" for n in rep["notes"]]
+    return "\n".join(lines) + "\n"
+
+
+def _bound(rho: dict[str, Any], key: str) -> float | None:
+    v = rho.get(key)
+    if v is None or isinstance(v, str):
+        return None
+    v = float(v)
+    return v if math.isfinite(v) else None
+
+
+def validation_figure(report: Any, path: Any) -> Path:
+    """The validation figure (PNG): each empirical mean gap over time with its confidence band
+    and the certified bound drawn in, titled with the status and whether the L1-DRAC runs are at
+    the certified parameters.
+
+    ``report`` is a :class:`~drip_cert.validate.run.ValidationReport` (simulated or recorded
+    data: its ``result.gap(name)`` gives the per-time statistics). Written atomically to ``path``.
+    """
+    import matplotlib  # matplotlib: keep off the CLI start-up path
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt  # matplotlib: keep off the CLI start-up path
+
+    rep = report.to_dict()
+    rho = (rep.get("certificate") or {}).get("rho") or {}
+    at_cert = bool(rep.get("at_certified_parameters"))
+    panels = []
+    for gap, label, key, bound_label in _VALIDATION_PANELS:
+        try:
+            g = report.result.gap(gap)
+        except (KeyError, AttributeError):
+            continue
+        if g.n > 0 and len(g.times) > 0:
+            panels.append((g, label, key, bound_label))
+    path = Path(path)
+    fig, axes = plt.subplots(
+        max(len(panels), 1), 1, figsize=(7.5, 2.6 * max(len(panels), 1) + 0.8), squeeze=False
+    )
+    for ax, (g, label, key, bound_label) in zip(axes[:, 0], panels, strict=False):
+        ax.plot(g.times, g.mean, color="tab:blue", lw=1.8, label=f"empirical mean ({g.n} paths)")
+        ax.fill_between(
+            g.times,
+            g.ci_low,
+            g.ci_high,
+            color="tab:blue",
+            alpha=0.25,
+            lw=0,
+            label=f"{100 * g.level:g}% confidence band",
+        )
+        b = _bound(rho, key)
+        l1_part = key != "rho_tasil"
+        if b is not None and (at_cert or not l1_part):
+            ax.axhline(b, color="tab:red", ls="--", lw=1.5, label=bound_label)
+        elif b is not None:
+            ax.axhline(
+                b,
+                color="tab:gray",
+                ls=":",
+                lw=1.2,
+                label=bound_label.split(":")[0] + " (NOT comparable: not at certified parameters)",
+            )
+        ax.set_title(label, fontsize=9)
+        ax.set_ylabel("gap")
+        top = float(np.nanmax(g.ci_high)) if np.any(np.isfinite(g.ci_high)) else 0.0
+        if b is not None and top > 0 and b / top > LOG_SCALE_RATIO:
+            # a bound far above the gap: a log axis shows both (the gap is 0 at t = 0: masked)
+            ax.set_yscale("log", nonpositive="mask")
+            ax.set_ylabel("gap (log scale)")
+        else:
+            ax.set_ylim(bottom=0.0)
+        ax.legend(fontsize=7, loc="best")
+    if not panels:
+        axes[0, 0].text(0.5, 0.5, "no gap series in this run", ha="center", va="center")
+    axes[-1, 0].set_xlabel("t [s]")
+    name = ((rep.get("certificate") or {}).get("system") or {}).get("name", "")
+    status = str(rep.get("status", "")).replace("_", " ").upper()
+    fig.suptitle(
+        f"{name}: validation {status}\n"
+        + ("AT certified parameters" if at_cert else "NOT at certified parameters (L1-DRAC)"),
+        fontsize=10,
+        color="black" if at_cert else "tab:red",
+    )
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.tmp.png")
+    try:
+        fig.savefig(tmp, dpi=120)
+        tmp.replace(path)
+    finally:
+        plt.close(fig)
+        if tmp.exists():
+            tmp.unlink()
+    return path
+
+
+def write_validation_outputs(report: Any, out: Any) -> list[Path]:
+    """Write ``validation.md`` and ``validation.png`` of ``report`` into ``out`` (atomically);
+    ``validation.json`` is the caller's. Returns the two paths."""
+    out = Path(out)
+    fig = validation_figure(report, out / "validation.png")
+    md = out / "validation.md"
+    atomic_write_text(md, validation_markdown(report.to_dict(), figure=fig.name))
+    return [md, fig]

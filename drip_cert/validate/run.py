@@ -36,10 +36,16 @@ from drip_cert.validate.scenarios import (
     MIN_SIMULABLE_TS,
     SHORT_PATHS,
     SHORT_STEPS,
+    dtype_effect,
     run_scenarios,
 )
 
-__all__ = ["ShortHorizonRun", "ValidationReport", "validate"]
+__all__ = ["VALIDATION_SCHEMA_VERSION", "ShortHorizonRun", "ValidationReport", "validate"]
+
+VALIDATION_SCHEMA_VERSION = 1
+"""Version of :meth:`ValidationReport.to_dict`'s layout (described by
+``drip_cert/schema/validation.schema.json``; adding a key needs no bump, removing, renaming or
+retyping one does)."""
 
 
 @dataclass(frozen=True)
@@ -114,6 +120,7 @@ class ValidationReport:
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready report (the keys of the ``validation.json`` file)."""
         return {
+            "schema_version": VALIDATION_SCHEMA_VERSION,
             "status": self.status,
             "holds": self.holds,
             "counts": self.counts,
@@ -144,8 +151,15 @@ def validate(
     horizon: float | None = None,
     progress: bool = False,
     run_dir: Path | None = None,
+    backend: Any = None,
+    policy_dtype: str = "float64",
 ) -> ValidationReport:
     """Validate certificate ``cert`` of ``s`` (which must have a learned policy) by simulation.
+
+    ``backend`` (:class:`~drip_cert.sim.backend.Backend`, default local) runs the main
+    simulation and changes no number. ``policy_dtype="float32"`` evaluates the learned policy
+    of the main run in float32 (opt-in, faster); its effect on the gaps, measured on the first
+    paths against float64, is then a note and ``empirical["policy_dtype_effect"]``.
 
     Returns
     -------
@@ -234,7 +248,14 @@ def validate(
         progress=progress,
         x0_box=x0_box,
         theta=theta,
+        backend=backend,
+        policy_dtype=policy_dtype,
     )
+    effect = None
+    if policy_dtype != "float64":
+        # on this machine: ~2 x 1000 paths, less than a cluster's start-up and compile
+        effect = dtype_effect(s, res, x0_box=x0_box, theta=theta)
+        notes.append(effect.note())
     checks = checks_from_result(
         res,
         rho_tasil=rho_tasil,
@@ -311,6 +332,8 @@ def validate(
             "argmax_time": g.argmax_time,
         }
     emp["w2"] = [w.to_dict() for w in res.w2]
+    if effect is not None:
+        emp["policy_dtype_effect"] = effect.to_dict()
     notes.append(
         "W2 estimates from samples are biased upward (see the same-law baselines "
         "beside each); they are reported, not checked against a bound"
