@@ -8,8 +8,21 @@ learned policy a tanh MLP 4-64-64-4, ``Lambda_mu = (0.1 + 0.05||x||) 1_4``,
 both implementations). The engine's rate excludes JIT compilation (reported separately) and
 includes its per-chunk statistics. The numpy loop steps all paths together in a Python loop.
 
-Usage: ``python benchmarks/mc_throughput.py [--quick] [--paths N] [--T T] [--dt DT]``.
-The last line printed is ``engine X steps/s, numpy Y steps/s, ratio Zx``.
+Roofline. In the same run the benchmark measures the machine's dense matrix throughput (a
+1024 x 1024 product, float64 and float32, the better of numpy's BLAS and XLA) and prints the
+engine's fraction of it for :data:`FLOPS_PER_PATH_STEP`, the dense FLOPs of one path-step (the
+policy 4-64-64-4 and ``h`` 4-32-4: ``2 * sum(fan_in * fan_out)``; elementwise work, ``tanh``,
+the noise and L1-DRAC are not counted, so the fraction is a lower bound of the useful work).
+
+``--float32`` also times the engine with the policy in float32 (``policy_dtype="float32"``) and
+prints the ratio to float64 and the largest change of the gap mean; ``--dask`` times the Dask
+backend on a LocalCluster of ``default_workers()`` processes against the local backend with the
+same chunks, checks that the results are identical, and prints the per-chunk cost and the wall
+time it implies for 10^8 and 10^9 paths on N workers.
+
+Usage: ``python benchmarks/mc_throughput.py [--quick] [--paths N] [--T T] [--dt DT] [--float32]
+[--dask] [--no-roofline]``. The last line printed is ``engine X steps/s, numpy Y steps/s, ratio
+Zx``.
 """
 
 from __future__ import annotations
@@ -27,11 +40,21 @@ from drip_cert._jax import jax, jnp
 from drip_cert.control.l1drac import L1Params
 from drip_cert.model.mlp import MLP, init_mlp
 from drip_cert.model.numeric import SimModel, make_model
+from drip_cert.sim.backend import Backend
 from drip_cert.sim.config import SCENARIOS, SimConfig
+from drip_cert.sim.dtype_effect import EFFECT_PATHS, policy_dtype_effect
 from drip_cert.sim.engine import default_workers, simulate
 from drip_cert.sim.noise import normals, normals_via_jax
 
 N = 4
+
+FLOPS_PER_PATH_STEP = 2 * (4 * 64 + 64 * 64 + 64 * 4) + 2 * (4 * 32 + 32 * 4)
+"""Dense FLOPs of one path-step of the benchmark scenario: the learned policy 4-64-64-4 and
+``h`` 4-32-4 in ``f`` (9728; a multiply-add is two)."""
+
+ROOFLINE_SIZE = 1024
+"""Side of the square products timed for the machine's matrix throughput (large enough for
+BLAS/XLA to reach their peak, small enough to take well under a second)."""
 
 
 def build_system(
@@ -190,6 +213,104 @@ def _micro(pol: MLP, n_paths: int, n_steps: int) -> None:
         print(f"  micro: {name:43s} {loop(body):7.1f} ns/path-step")
 
 
+def matmul_throughput(dtype, repeats: int = 5) -> tuple[float, float]:
+    """FLOP/s of a ``ROOFLINE_SIZE`` square product: ``(numpy BLAS, XLA)``, best of
+    ``repeats``, all cores."""
+    k = ROOFLINE_SIZE
+    rng = np.random.default_rng(0)
+    a = rng.normal(size=(k, k)).astype(dtype)
+    b = rng.normal(size=(k, k)).astype(dtype)
+    flops = 2.0 * k**3
+
+    def best(f) -> float:
+        f()
+        ts = []
+        for _ in range(repeats):
+            t0 = time.perf_counter()
+            f()
+            ts.append(time.perf_counter() - t0)
+        return flops / min(ts)
+
+    ja, jb = jnp.asarray(a), jnp.asarray(b)
+    mm = jax.jit(jnp.matmul)
+    return best(lambda: a @ b), best(lambda: mm(ja, jb).block_until_ready())
+
+
+def _roofline() -> dict[str, float]:
+    """The machine's matrix throughput per dtype (the better of numpy and XLA), printed."""
+    out = {}
+    for dt in ("float64", "float32"):
+        blas, xla = matmul_throughput(np.dtype(dt))
+        out[dt] = max(blas, xla)
+        print(
+            f"  roofline {dt}: {ROOFLINE_SIZE}^2 product, numpy {blas / 1e9:.1f} GFLOP/s, "
+            f"XLA {xla / 1e9:.1f} GFLOP/s"
+        )
+    return out
+
+
+def _fraction(rate: float, roof: dict[str, float] | None, dt: str) -> str:
+    """``, X GFLOP/s = Y % of the dt roofline`` for ``rate`` path-steps/s (empty without)."""
+    if not roof:
+        return ""
+    gf = rate * FLOPS_PER_PATH_STEP
+    return f", {gf / 1e9:.1f} GFLOP/s = {100 * gf / roof[dt]:.0f} % of the {dt} roofline"
+
+
+def _float32(model, cfg: SimConfig, r64, roof) -> None:
+    """The engine with the policy in float32: rate, ratio to float64, the gap change."""
+    cfg32 = dataclasses.replace(cfg, policy_dtype="float32")
+    r32 = simulate(model, cfg32, x0_sampler, progress=False)
+    steps = cfg.n_paths * cfg.n_steps
+    e64, e32 = steps / r64.run_s, steps / r32.run_s
+    print(
+        f"  engine, policy in float32: run {r32.run_s:.2f} s -> {e32:.3g} steps/s, "
+        f"{e32 / e64:.2f}x float64{_fraction(e32, roof, 'float32')}"
+    )
+    # the effect on the gaps: all four scenarios, the first paths in both dtypes
+    eff = policy_dtype_effect(
+        model,
+        dataclasses.replace(cfg, scenarios=SCENARIOS),
+        x0_sampler,
+        n_paths=min(EFFECT_PATHS, cfg.n_paths),
+    )
+    worst = max(eff.gaps, key=lambda g: g.max_abs_mean)
+    print(
+        f"  float32 policy, effect on {eff.n_paths} paths: gap means moved by <= "
+        f"{eff.max_abs_gap_mean:.2g} ({worst.name}: max mean {worst.max_mean_64:.4g} -> "
+        f"{worst.max_mean_32:.4g}), {eff.max_relative_to_ci:.2g}x the CI half-width; "
+        f"states by <= {eff.max_abs_state:.2g}"
+    )
+
+
+def _dask(model, cfg: SimConfig, workers: int) -> None:
+    """Dask backend (LocalCluster of ``workers``) against the local backend, same chunks."""
+    chunk = cfg.chunk_size if cfg.n_chunks > 1 else -(-cfg.n_paths // (4 * workers))
+    c = dataclasses.replace(cfg, chunk_size=chunk)
+    loc = simulate(model, c, x0_sampler, progress=False)
+    dsk = simulate(model, c, x0_sampler, progress=False, backend=Backend("dask", n_workers=workers))
+    same = all(
+        np.array_equal(a, b, equal_nan=True)
+        for ga, gb in zip(loc.gaps, dsk.gaps)
+        for a, b in ((ga.mean, gb.mean), (ga.power_sums, gb.power_sums), (ga.path_max, gb.path_max))
+    )
+    steps = c.n_paths * c.n_steps
+    el, ed = steps / loc.run_s, steps / dsk.run_s
+    per_chunk = dsk.run_s * workers / c.n_chunks  # seconds of one worker per chunk
+    print(
+        f"  dask ({workers} workers, {c.n_chunks} chunks of {chunk}): "
+        f"compile {dsk.compile_s:.1f} s (on the workers), run {dsk.run_s:.2f} s -> "
+        f"{ed:.3g} steps/s; local, same chunks {el:.3g} steps/s; dask/local {ed / el:.2f}x; "
+        f"identical results: {same}"
+    )
+    per_path = per_chunk / chunk  # worker-seconds per path at this T
+    for n_paths in (10**8, 10**9):
+        est = ", ".join(
+            f"{nw} workers {per_path * n_paths / nw / 3600:.2g} h" for nw in (2, 16, 64, 256)
+        )
+        print(f"  dask estimate, {n_paths:.0e} paths at T={c.T:g}: {est}")
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--quick", action="store_true", help="1000 paths, T = 0.5")
@@ -199,6 +320,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--chunk", type=int, default=None, help="engine chunk size (default: paths)")
     ap.add_argument("--all-scenarios", action="store_true", help="also time the 4-scenario pass")
     ap.add_argument("--no-profile", action="store_true")
+    ap.add_argument("--no-roofline", action="store_true", help="skip the matrix throughput")
+    ap.add_argument("--float32", action="store_true", help="also time the float32 policy path")
+    ap.add_argument("--dask", action="store_true", help="also time the Dask backend")
     args = ap.parse_args(argv)
     n_paths = args.paths or (1000 if args.quick else 10_000)
     T = args.T or (0.5 if args.quick else 5.0)
@@ -221,10 +345,16 @@ def main(argv: list[str] | None = None) -> int:
     res = simulate(model, cfg, x0_sampler, progress=False)
     eng = n_paths * n_steps / res.run_s
     workers = default_workers()
+    roof = None if args.no_roofline else _roofline()
     print(
         f"  engine ({workers} workers): compile {res.compile_s:.2f} s, run {res.run_s:.2f} s "
-        f"-> {eng:.3g} steps/s"
+        f"-> {eng:.3g} steps/s{_fraction(eng, roof, 'float64')} "
+        f"({FLOPS_PER_PATH_STEP} dense FLOPs per path-step)"
     )
+    if args.float32:
+        _float32(model, cfg, res, roof)
+    if args.dask:
+        _dask(model, cfg, workers)
     rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024  # Linux: KiB
     print(f"  peak resident memory after the engine: {rss:.0f} MiB (chunks of {cfg.chunk_size})")
     if not args.no_profile:

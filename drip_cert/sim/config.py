@@ -16,7 +16,15 @@ import numpy as np
 from drip_cert.control.l1drac import L1Params
 from drip_cert.errors import SpecError
 
-__all__ = ["GAPS", "SCENARIOS", "STATUS_CAP", "STATUS_NONFINITE", "STATUS_OK", "SimConfig"]
+__all__ = [
+    "GAPS",
+    "POLICY_DTYPES",
+    "SCENARIOS",
+    "STATUS_CAP",
+    "STATUS_NONFINITE",
+    "STATUS_OK",
+    "SimConfig",
+]
 
 SCENARIOS = ("expert_nominal", "learned_nominal", "learned_true", "learned_l1_true")
 
@@ -35,6 +43,9 @@ GAPS = (
     ("total_l1", "learned_l1_true", "expert_nominal"),
     ("uncertainty_l1", "learned_l1_true", "learned_nominal"),
 )
+
+POLICY_DTYPES = ("float64", "float32")
+"""Dtypes the learned policy can be evaluated in (:attr:`SimConfig.policy_dtype`)."""
 
 _STEP_RTOL = 1e-9
 """Relative tolerance on T/dt being an integer (float inputs like T=5, dt=1e-3 are a few ulps
@@ -99,8 +110,14 @@ class SimConfig:
     ci_level: float = 0.95
     divergence_cap: float = 1e6
     gap_readout: tuple[tuple[float, ...], ...] | None = None
+    policy_dtype: str = "float64"
 
     def __post_init__(self) -> None:
+        if self.policy_dtype not in POLICY_DTYPES:
+            raise SpecError(
+                f"policy_dtype must be one of {POLICY_DTYPES}, got {self.policy_dtype!r}",
+                field="SimConfig.policy_dtype",
+            )
         if self.gap_readout is not None:
             M = np.array(self.gap_readout, dtype=np.float64)
             if (
@@ -234,4 +251,6 @@ class SimConfig:
             del out["gap_readout"]  # the resume hash of runs without one is unchanged
         else:
             out["gap_readout"] = [list(r) for r in self.gap_readout]
+        if self.policy_dtype == "float64":
+            del out["policy_dtype"]  # the resume hash of float64 runs is unchanged
         return out

@@ -39,6 +39,15 @@ fingerprint of the model and the samplers) and the accumulators are written atom
 each chunk; a rerun with the same settings continues after the last finished chunk, and its result
 is bit-for-bit that of an uninterrupted run (:mod:`drip_cert.sim.resume`).
 
+Backends. ``backend=Backend("dask", scheduler)`` computes the chunks as tasks on a Dask cluster
+(:mod:`drip_cert.sim.dask_backend`: the kernel travels as exported StableHLO, a lost worker costs
+only its chunks); the chunks are absorbed here in the same order, so the statistics and the
+resume files are the local backend's, bit for bit.
+
+Float32 policy. ``SimConfig(policy_dtype="float32")`` evaluates the learned policy in float32
+(:mod:`drip_cert.sim.precision`), everything else in float64; opt-in, and its effect on the gaps
+is measured by :func:`drip_cert.sim.dtype_effect.policy_dtype_effect`.
+
 Progress. The bar counts path-steps. The kernel runs a batch in calls of a few recorded times each
 (:mod:`drip_cert.sim.kernel`), and the bar advances after each call, so a run of one chunk moves
 smoothly too; without a bar the calls are queued without waiting on any of them.
@@ -62,7 +71,9 @@ from drip_cert._jax import jax, jnp
 from drip_cert.errors import SpecError
 from drip_cert.model.numeric import SimModel
 from drip_cert.sim.accumulate import RunState, absorb, new_state
+from drip_cert.sim.backend import Backend
 from drip_cert.sim.config import SimConfig
+from drip_cert.sim.dask_backend import run_chunks
 from drip_cert.sim.kernel import build_chunk_fn
 from drip_cert.sim.result import SimResult, build_result
 from drip_cert.sim.resume import open_run, save_state, settings_hash
@@ -83,6 +94,7 @@ def simulate(
     progress: bool | None = None,
     stop_after_chunks: int | None = None,
     workers: int | None = None,
+    backend: Backend | None = None,
 ) -> SimResult:
     """Simulate the scenarios of ``config`` on ``model`` and return their statistics.
 
@@ -113,6 +125,11 @@ def simulate(
         4.4e6 with 2, on the 4-D paper system). Fewer chunks than workers are split into equal
         sub-batches. Results do not depend on ``workers``, bit for bit: the noise of
         a path is a function of its global index, and chunks are absorbed in order.
+    backend
+        :class:`~drip_cert.sim.backend.Backend`: ``None`` or ``Backend()`` runs here;
+        ``Backend("dask", scheduler)`` runs one task per chunk on a Dask cluster
+        (:mod:`drip_cert.sim.dask_backend`; ``workers`` is then the size of the LocalCluster
+        started when no scheduler is named). The same numbers and resume files either way.
 
     Returns
     -------
@@ -144,7 +161,30 @@ def simulate(
         todo = todo[: max(0, int(stop_after_chunks))]
     compile_s = 0.0
     t_run = 0.0
-    if todo:
+    backend = Backend() if backend is None else backend
+    if not isinstance(backend, Backend):
+        raise SpecError("backend must be a drip_cert.sim.backend.Backend", field="backend")
+    if todo and backend.kind == "dask":
+        n_local = backend.n_workers or (default_workers() if workers is None else int(workers))
+        if n_local < 1:
+            raise SpecError(f"workers must be >= 1, got {workers!r}", field="workers")
+        show = progress if progress is not None else sys.stderr.isatty()
+        with _bar(cfg, state, show) as bar:
+            state, compile_s, t_run = run_chunks(
+                backend,
+                model,
+                cfg,
+                x0_sampler,
+                x0_bar_sampler,
+                state,
+                todo,
+                h,
+                rdir,
+                bar,
+                max_in_flight=max(1, _MAX_CHUNK_BYTES // max(rec_bytes, 1)),
+                local_workers=n_local,
+            )
+    elif todo:
         n_workers = default_workers() if workers is None else int(workers)
         if n_workers < 1:
             raise SpecError(f"workers must be >= 1, got {workers!r}", field="workers")
@@ -156,14 +196,7 @@ def simulate(
         kernel = build_chunk_fn(model, cfg, x0_sampler, x0_bar_sampler).compile(sub)
         compile_s = time.perf_counter() - t0
         show = progress if progress is not None else sys.stderr.isatty()
-        bar = tqdm(
-            total=cfg.n_paths * cfg.n_steps,
-            initial=state.n_done * cfg.n_steps,
-            disable=not show,
-            unit="path-step",
-            unit_scale=True,
-            file=sys.stderr,
-        )
+        bar = _bar(cfg, state, show)
         lock = threading.Lock()
 
         def run_part(idx, n_real: int):
@@ -211,6 +244,18 @@ def simulate(
                 state = finish(state, pending.popleft())
         t_run = time.perf_counter() - t1
     return build_result(model.name, cfg, h, state, compile_s, t_run)
+
+
+def _bar(cfg: SimConfig, state: RunState, show: bool) -> tqdm:
+    """The progress bar of a run: path-steps on stderr, from those already done."""
+    return tqdm(
+        total=cfg.n_paths * cfg.n_steps,
+        initial=state.n_done * cfg.n_steps,
+        disable=not show,
+        unit="path-step",
+        unit_scale=True,
+        file=sys.stderr,
+    )
 
 
 def default_workers() -> int:

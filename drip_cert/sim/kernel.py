@@ -20,9 +20,11 @@ import dataclasses
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
+from functools import partial
 from typing import Any
 
 import numpy as np
+from jax import export as jexport
 
 from drip_cert._jax import jax, jnp
 from drip_cert.control.l1drac import L1State, l1_init, l1_step
@@ -30,8 +32,9 @@ from drip_cert.errors import SpecError
 from drip_cert.model.numeric import SimModel
 from drip_cert.sim.config import STATUS_CAP, STATUS_NONFINITE, STATUS_OK, SimConfig
 from drip_cert.sim.noise import normals
+from drip_cert.sim.precision import lower_precision
 
-__all__ = ["ChunkKernel", "CompiledChunk", "build_chunk_fn"]
+__all__ = ["ChunkKernel", "CompiledChunk", "ExportedChunk", "build_chunk_fn"]
 
 MIN_CALL_PATH_STEPS = 1 << 18
 """Least work of one kernel call, in path-steps of all scenarios together. A call costs up to
@@ -144,6 +147,44 @@ class ChunkKernel:
         ).compile()
         return CompiledChunk(self.key, start, advance, k, (self.config.n_records - 1) // k)
 
+    def export(self, batch: int) -> ExportedChunk:
+        """Both programs for batches of ``batch`` paths as serialized StableHLO (``jax.export``).
+
+        What a remote worker needs to simulate any chunk of this run without the model's Python
+        code: the programs are lowered here, from the same functions as :meth:`compile`, and
+        compiled where they run (:meth:`ExportedChunk.load`). The carry crosses the boundary as
+        its flat list of arrays.
+        """
+        k = self.records_per_call(batch)
+        start = partial(_start_impl, model=self.model, config=self.config, samplers=self.samplers)
+        advance = partial(_advance_impl, model=self.model, config=self.config, records_per_call=k)
+        key = jax.ShapeDtypeStruct(self.key.shape, self.key.dtype)
+        idx = jax.ShapeDtypeStruct((batch,), jnp.uint32)
+        r0 = jax.ShapeDtypeStruct((), jnp.uint32)
+        carry_shape, _ = jax.eval_shape(start, key, idx)
+        leaves, treedef = jax.tree_util.tree_flatten(carry_shape)
+
+        def start_flat(key, idx):
+            carry, rec0 = start(key, idx)
+            return jax.tree_util.tree_leaves(carry), rec0
+
+        def advance_flat(key, flat, r0):
+            carry, recs = advance(key, jax.tree_util.tree_unflatten(treedef, flat), r0)
+            return jax.tree_util.tree_leaves(carry), recs
+
+        s = len(self.config.scenarios)
+        # the carry is (states, codes, L1 states, idx): its leaves s..2s-1 are the codes
+        assert all(leaf.dtype == jnp.int8 for leaf in leaves[s : 2 * s])
+        return ExportedChunk(
+            key=np.asarray(self.key),
+            start=bytes(jexport.export(jax.jit(start_flat))(key, idx).serialize()),
+            advance=bytes(jexport.export(jax.jit(advance_flat))(key, leaves, r0).serialize()),
+            batch=batch,
+            n_scenarios=s,
+            records_per_call=k,
+            n_calls=(self.config.n_records - 1) // k,
+        )
+
     def __call__(self, idx) -> tuple[jax.Array, jax.Array]:
         """Compile for ``idx.shape[0]`` paths and simulate them (see :func:`build_chunk_fn`)."""
         recs, codes = self.compile(idx.shape[0])(idx)
@@ -194,6 +235,46 @@ class CompiledChunk:
             jax.block_until_ready(blocks[-1])
             on_block(self.records_per_call)
         return blocks, jnp.stack(carry[1])
+
+
+@dataclass(frozen=True)
+class ExportedChunk:
+    """The kernel of one run for one batch size, serialized (:meth:`ChunkKernel.export`).
+
+    Picklable plain data: the key, the two programs as ``jax.export`` bytes and the call
+    schedule. :meth:`load` deserializes and compiles them for this machine's default device.
+    """
+
+    key: np.ndarray
+    start: bytes
+    advance: bytes
+    batch: int
+    n_scenarios: int
+    records_per_call: int
+    n_calls: int
+
+    def load(self) -> Callable:
+        """``idx (batch,) uint32 -> (record blocks in time order, codes (S, batch))``."""
+        start = jexport.deserialize(bytearray(self.start))
+        advance = jexport.deserialize(bytearray(self.advance))
+        start_c = jax.jit(start.call).lower(*start.in_avals).compile()
+        advance_c = (
+            jax.jit(lambda k, *rest: advance.call(k, list(rest[:-1]), rest[-1]))
+            .lower(*advance.in_avals)
+            .compile()
+        )
+        key = jnp.asarray(self.key)
+        s = self.n_scenarios
+
+        def run(idx) -> tuple[list[jax.Array], jax.Array]:
+            flat, rec0 = start_c(key, idx)
+            blocks = [rec0]
+            for c in range(self.n_calls):
+                flat, recs = advance_c(key, *flat, np.uint32(c * self.records_per_call))
+                blocks.append(recs)
+            return blocks, jnp.stack(flat[s : 2 * s])
+
+        return run
 
 
 class _ByIdentity:
@@ -273,7 +354,11 @@ def _advance_impl(key, carry, r0, *, model, config, records_per_call):
     lam_mu_b = jax.vmap(model.lam_mu, in_axes=(None, 0))
     diff_b = jax.vmap(lambda t, x: model.p(t, x) + model.lam_sigma(t, x), in_axes=(None, 0))
     expert_b = jax.vmap(model.expert)
-    learned_b = jax.vmap(model.learned) if model.learned is not None else None
+    learned = model.learned
+    if learned is not None and config.policy_dtype != "float64":
+        # opt-in: pi_IL's arithmetic in float32, its input and output float64 (sim/precision.py)
+        learned = lower_precision(learned, model.n, jnp.dtype(config.policy_dtype))
+    learned_b = jax.vmap(learned) if learned is not None else None
     l1_b = (
         jax.vmap(
             lambda st, x, fk, g_t, th: l1_step(l1p, st, x, fk, g_t, th),

@@ -57,12 +57,15 @@ def run_scenarios(
     progress: bool = False,
     x0_box: Any = None,
     theta: np.ndarray | None = None,
+    backend: Any = None,
+    policy_dtype: str = "float64",
 ):
     """Simulate the four scenarios of the DRIP paper for ``s`` (with its learned policy).
 
     Initial states are uniform on ``x0_box`` (default ``s.support``), mapped by ``theta`` when
     ``s`` is a system in coordinates ``z = theta x``; the gap statistics are then those of the
-    user's ``x = theta^{-1} z`` (:attr:`~drip_cert.sim.config.SimConfig.gap_readout`)."""
+    user's ``x = theta^{-1} z`` (:attr:`~drip_cert.sim.config.SimConfig.gap_readout`).
+    ``backend`` (:class:`~drip_cert.sim.backend.Backend`) and ``policy_dtype`` go to the engine."""
     from drip_cert.sim.config import SimConfig  # jax: keep off the API's import path
     from drip_cert.sim.engine import simulate  # jax: keep off the API's import path
 
@@ -79,6 +82,25 @@ def run_scenarios(
         w2_times=w2_times,
         w2_points=min(2000, max(2, paths // 2)),
         gap_readout=None if theta is None else tuple(map(tuple, np.linalg.inv(theta))),
+        policy_dtype=policy_dtype,
     )
     box = s.support if x0_box is None else x0_box
-    return simulate(s.numeric, cfg, x0_sampler(box, theta), run_dir=run_dir, progress=progress)
+    return simulate(
+        s.numeric,
+        cfg,
+        x0_sampler(box, theta),
+        run_dir=run_dir,
+        progress=progress,
+        backend=backend,
+    )
+
+
+def dtype_effect(
+    s: System, result: Any, *, x0_box: Any = None, theta: np.ndarray | None = None, backend=None
+):
+    """The float32 policy's effect on the gaps of the run ``result`` of :func:`run_scenarios`,
+    measured on its first paths (:func:`~drip_cert.sim.dtype_effect.policy_dtype_effect`)."""
+    from drip_cert.sim.dtype_effect import policy_dtype_effect  # jax: keep off the import path
+
+    box = s.support if x0_box is None else x0_box
+    return policy_dtype_effect(s.numeric, result.config, x0_sampler(box, theta), backend=backend)

@@ -1,0 +1,136 @@
+"""The opt-in float32 policy path: what it computes, that it changes only the policy, that the
+engine's invariances hold for it, and the measured effect on the gaps."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from drip_cert._jax import jax, jnp
+from drip_cert.errors import SpecError
+from drip_cert.model.mlp import init_mlp
+from drip_cert.sim.config import SimConfig
+from drip_cert.sim.dtype_effect import DtypeEffect, policy_dtype_effect
+from drip_cert.sim.engine import simulate
+from drip_cert.sim.precision import lower_precision
+from drip_cert.sim.resume import settings_hash
+from tests.test_engine import _CFG, _arrays, _mlp_model, _x0, _x0_bar
+
+F32_EPS = float(np.finfo(np.float32).eps)
+
+F32_MLP_REL = 64 * F32_EPS
+"""The float32 network against a float32 numpy evaluation of the same rounded weights: two
+float32 evaluations in another summation order and another tanh, a few dozen ulps of the O(1)
+outputs at most."""
+
+F32_PATH_ABS = 1e-4
+"""|x32 - x64| of simulated O(1) states after 100 steps: the policy's ~1e-7 relative rounding,
+scaled by dt and grown by the closed loop's Lipschitz constant; observed ~1e-7, and 1e-4 still
+fails on a wrong network (a different weight moves the states by ~1e-2)."""
+
+
+def _assert_bitwise(r1, r2):
+    for x, y in zip(_arrays(r1), _arrays(r2), strict=True):
+        assert x.shape == y.shape
+        assert np.array_equal(x, y, equal_nan=True)
+
+
+@pytest.fixture(scope="module")
+def model():
+    return _mlp_model()
+
+
+def test_lower_precision_is_the_network_in_float32():
+    """The lowered function equals the MLP evaluated with float32 weights and float32
+    arithmetic, differs from float64 by float32 rounding (not zero), and returns float64."""
+    pol = init_mlp([4, 64, 64, 4], np.random.default_rng(0))
+    low = jax.jit(jax.vmap(lower_precision(pol.apply_jax, 4)))
+    x = np.random.default_rng(1).uniform(-1, 1, size=(200, 4))
+    y32 = np.asarray(low(jnp.asarray(x)))
+    assert y32.dtype == np.float64
+    h = x.astype(np.float32)
+    for i, (w, b) in enumerate(pol.params()):
+        h = h @ w.astype(np.float32).T + b.astype(np.float32)
+        h = np.tanh(h) if i < len(pol.weights) - 1 else h
+    ref = h.astype(np.float64)
+    scale = np.max(np.abs(ref))
+    assert np.max(np.abs(y32 - ref)) <= F32_MLP_REL * scale
+    y64 = pol.apply_np(x)
+    diff = np.max(np.abs(y32 - y64))
+    assert 0 < diff <= F32_MLP_REL * scale
+
+
+def test_lower_precision_inlines_calls_and_keeps_control_flow():
+    """jit-wrapped helpers (norm) and custom_jvp functions (relu) are evaluated in float32;
+    control flow (cond) is evaluated as written in float64 between casts; all give the float64
+    answer up to float32 rounding."""
+
+    def fn(x):
+        r = jnp.linalg.norm(x) * jax.nn.relu(x - 0.1)
+        return jax.lax.cond(x[0] > 0, lambda v: 2.0 * v, lambda v: -v, r)
+
+    low = lower_precision(fn, 3)
+    for x in (jnp.array([0.5, -0.2, 0.9]), jnp.array([-0.5, 0.3, 0.4])):
+        y, y64 = low(x), fn(x)
+        assert y.dtype == jnp.float64
+        np.testing.assert_allclose(np.asarray(y), np.asarray(y64), rtol=F32_MLP_REL, atol=0)
+    # the dot of a float32 run really is float32 (the jaxpr says so)
+    text = str(jax.make_jaxpr(lower_precision(lambda x: x @ jnp.ones((3, 2)), 3))(jnp.ones(3)))
+    assert "f32[2] = dot_general" in text
+
+
+def test_float32_run_moves_paths_by_rounding_only(model):
+    """Same seed, same paths: the float32 policy moves the states by rounding, not more; the
+    expert-only scenario does not use the policy and is bit-for-bit unchanged."""
+    r64 = simulate(model, _CFG, _x0, _x0_bar, progress=False)
+    r32 = simulate(
+        model, dataclasses.replace(_CFG, policy_dtype="float32"), _x0, _x0_bar, progress=False
+    )
+    d = np.abs(r32.sample_paths - r64.sample_paths)
+    i_exp = _CFG.scenarios.index("expert_nominal")
+    assert np.array_equal(r32.sample_paths[i_exp], r64.sample_paths[i_exp])
+    assert 0 < np.max(d) <= F32_PATH_ABS
+
+
+def test_float32_keeps_chunk_and_worker_invariance(model):
+    cfg = dataclasses.replace(_CFG, policy_dtype="float32")
+    base = simulate(model, cfg, _x0, _x0_bar, progress=False)
+    for cs, workers in ((7, 1), (45, 2)):
+        res = simulate(
+            model,
+            dataclasses.replace(cfg, chunk_size=cs),
+            _x0,
+            _x0_bar,
+            progress=False,
+            workers=workers,
+        )
+        _assert_bitwise(base, res)
+
+
+def test_policy_dtype_setting_and_hash(model):
+    with pytest.raises(SpecError, match="policy_dtype"):
+        dataclasses.replace(_CFG, policy_dtype="float16")
+    assert "policy_dtype" not in _CFG.to_dict()  # float64 runs keep their resume hash
+    cfg32 = dataclasses.replace(_CFG, policy_dtype="float32")
+    assert cfg32.to_dict()["policy_dtype"] == "float32"
+    assert settings_hash(model, _CFG, _x0, _x0_bar) != settings_hash(model, cfg32, _x0, _x0_bar)
+
+
+def test_policy_dtype_effect_reports_the_shift_against_the_mc_error(model):
+    cfg = SimConfig(
+        T=0.2, dt=0.002, n_paths=300, seed=4, l1=_CFG.l1, record_every=10, chunk_size=128
+    )
+    eff = policy_dtype_effect(model, cfg, _x0, _x0_bar, n_paths=200)
+    assert isinstance(eff, DtypeEffect)
+    assert eff.n_paths == 200
+    assert {g.name for g in eff.gaps} == {g[0] for g in cfg.gaps}
+    # float32 rounding is far below the Monte-Carlo error of 200 paths
+    assert 0 < eff.max_abs_gap_mean <= F32_PATH_ABS
+    assert eff.max_relative_to_ci < 1e-2
+    assert "float32" in eff.note() and "200 paths" in eff.note()
+    d = eff.to_dict()
+    assert d["n_paths"] == 200 and len(d["gaps"]) == len(eff.gaps)
+    with pytest.raises(SpecError, match="n_paths"):
+        policy_dtype_effect(model, cfg, _x0, _x0_bar, n_paths=0)
