@@ -105,24 +105,39 @@ def _norm_up(M: np.ndarray) -> float:
     return add_up(float(spectral_norm_upper(np.asarray(M, dtype=float))), _conversion_radius(M))
 
 
-def _blocks_sum(s: System, dec: AffineBlocks) -> tuple[float, list[Quantity]] | None:
+def _block_lipschitz(s: System, name: str) -> Quantity | None:
+    """The certified Lipschitz constant of block ``name`` (the smaller sound one of the layer
+    product and LipSDP), ``None`` when the block is not an MLP or no bound is finite."""
+    mlp = s.blocks[name].mlp
+    if mlp is None:
+        return None
+    cands = [lipschitz_bound(mlp, "product")]
+    try:
+        cands.append(lipschitz_bound(mlp, "lipsdp"))
+    except Exception:  # noqa: BLE001 - the SDP solver may fail; the product bound stays
+        pass
+    sound = [q for q in cands if q.how != How.ESTIMATE and math.isfinite(q.value)]
+    return min(sound, key=lambda q: q.value).renamed(f"Lip({name})") if sound else None
+
+
+#: block name -> its Lipschitz quantity, shared by the routes of one call (LipSDP solved once)
+LipMemo = dict[str, Quantity | None]
+
+
+def _blocks_sum(
+    s: System, dec: AffineBlocks, memo: LipMemo | None = None
+) -> tuple[float, list[Quantity]] | None:
     """``sum_k ||C_k||_2 L_k`` rounded up, and the Lipschitz quantities; ``None`` when a block is
-    not an MLP (no certified Lipschitz constant)."""
+    not an MLP (no certified Lipschitz constant). ``memo`` keeps each block's constant."""
+    memo = {} if memo is None else memo
     total = 0.0
     lips: list[Quantity] = []
     for name, C in dec.C.items():
-        mlp = s.blocks[name].mlp
-        if mlp is None:
+        if name not in memo:
+            memo[name] = _block_lipschitz(s, name)
+        L = memo[name]
+        if L is None:
             return None
-        cands = [lipschitz_bound(mlp, "product")]
-        try:
-            cands.append(lipschitz_bound(mlp, "lipsdp"))
-        except Exception:  # noqa: BLE001 - the SDP solver may fail; the product bound stays
-            pass
-        sound = [q for q in cands if q.how != How.ESTIMATE and math.isfinite(q.value)]
-        if not sound:
-            return None
-        L = min(sound, key=lambda q: q.value).renamed(f"Lip({name})")
         lips.append(L)
         if np.any(C):
             total = add_up(total, mul_up(_norm_up(C), L.value))
@@ -145,7 +160,9 @@ def _result(rate: Quantity, method: str, note: str, t0: float) -> ContractionRes
     )
 
 
-def lipschitz_rate(s: System, which: str = "learned") -> GlobalRate | None:
+def lipschitz_rate(
+    s: System, which: str = "learned", memo: LipMemo | None = None
+) -> GlobalRate | None:
     """Route "lipschitz-affine-mlp": ``lambda >= -(mu_2(A) + sum_k ||C_k||_2 L_k)`` on all x, t.
 
     ``None`` when the closed loop is not affine in MLP blocks applied to the whole state, depends
@@ -157,7 +174,7 @@ def lipschitz_rate(s: System, which: str = "learned") -> GlobalRate | None:
     dec = affine_in_blocks(s.closed_loop(which), s)
     if dec is None:
         return None
-    parts = _blocks_sum(s, dec)
+    parts = _blocks_sum(s, dec, memo)
     if parts is None:
         return None
     total, lips = parts
@@ -185,7 +202,9 @@ def lipschitz_rate(s: System, which: str = "learned") -> GlobalRate | None:
     return GlobalRate(_result(rate, "lipschitz-affine-mlp", note, t0), rate, (mu_a, *lips))
 
 
-def perturbation_rate(s: System, expert_rate: Quantity) -> GlobalRate | None:
+def perturbation_rate(
+    s: System, expert_rate: Quantity, memo: LipMemo | None = None
+) -> GlobalRate | None:
     """Route "perturbation-of-expert": ``lambda_IL >= lambda* - ||g||_2 sup_x ||D(pi_IL - pi*)||``.
 
     Needs a constant ``g``, a global (exact or sound) ``expert_rate`` and ``pi_IL - pi*`` affine in
@@ -202,7 +221,7 @@ def perturbation_rate(s: System, expert_rate: Quantity) -> GlobalRate | None:
     dec = affine_in_blocks(delta, s)
     if dec is None:
         return None
-    parts = _blocks_sum(s, dec)
+    parts = _blocks_sum(s, dec, memo)
     if parts is None:
         return None
     total, lips = parts
@@ -240,9 +259,10 @@ def perturbation_rate(s: System, expert_rate: Quantity) -> GlobalRate | None:
 
 def best_global_rate(s: System, expert_rate: Quantity | None) -> GlobalRate | None:
     """The larger proved rate of the two routes (``None`` when neither applies)."""
-    cands = [lipschitz_rate(s, "learned")]
+    memo: LipMemo = {}
+    cands = [lipschitz_rate(s, "learned", memo)]
     if expert_rate is not None:
-        cands.append(perturbation_rate(s, expert_rate))
+        cands.append(perturbation_rate(s, expert_rate, memo))
     ok = [c for c in cands if c is not None and math.isfinite(c.rate.value)]
     return max(ok, key=lambda c: c.rate.value) if ok else None
 
