@@ -485,3 +485,32 @@ def _json_float(x: float) -> float | str | None:
 
 
 json_float = _json_float
+
+
+# ---------------------------------------------------------------------------------- timings
+#: keys that hold wall-clock measurements in the JSON of a result: they vary from run to run, so
+#: :func:`split_timings` moves them under one top-level key that comparisons (``diff``) ignore
+TIMING_KEYS = frozenset({"time_s", "seconds", "wall_time_s", "time_to_below"})
+
+
+def split_timings(d: dict[str, Any], prefix: str = "") -> dict[str, Any]:
+    """Remove every timing (a key of :data:`TIMING_KEYS`) from the nested dict ``d`` in place and
+    return them flat, keyed by their dotted path (``contraction.expert.time_s``).
+
+    Lists are walked too (the path takes the index). What remains of ``d`` is a function of the
+    inputs alone: the reproducible part of a certificate.
+    """
+    out: dict[str, Any] = {}
+
+    def walk(node: Any, path: str) -> None:
+        if isinstance(node, dict):
+            for k in [k for k in node if k in TIMING_KEYS]:
+                out[f"{path}{k}"] = node.pop(k)
+            for k, v in node.items():
+                walk(v, f"{path}{k}.")
+        elif isinstance(node, list):
+            for i, v in enumerate(node):
+                walk(v, f"{path}{i}.")
+
+    walk(d, prefix)
+    return out

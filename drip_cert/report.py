@@ -34,7 +34,31 @@ def certificate_markdown(cert: Any) -> str:
         "conditional": "CONDITIONAL",
         "not_certified": "NOT CERTIFIED",
     }[d["verdict"]]
-    lines.append(f"**{verdict}** (n = {s['n']}, m = {s['m']}, d = {s['d']}, T = {s['horizon']:g})")
+    skipped = [
+        k for k, v in d["parts"].items() if v["verdict"] in ("not_requested", "not_applicable")
+    ]
+    covers = [k for k in d["parts"] if k not in skipped]
+    lines.append(
+        f"**{verdict}**"
+        + (
+            f" for the parts computed ({', '.join(covers)}; not: {', '.join(skipped)})"
+            if skipped
+            else ""
+        )
+        + f" (n = {s['n']}, m = {s['m']}, d = {s['d']}, T = {s['horizon']:g})"
+    )
+    lines.append("")
+    lines.append(
+        "Parts: "
+        + "; ".join(f"{k}: {v['verdict'].replace('_', ' ')}" for k, v in d["parts"].items())
+        + "; rho = rho_TaSIL + rho_L1: "
+        + ("certified" if d["rho"]["certified"] else "not certified (needs both parts)")
+    )
+    lines.extend(
+        f"* {k} {v['verdict'].replace('_', ' ')}: {v['reasons'][0]}"
+        for k, v in d["parts"].items()
+        if v["verdict"] in ("not_requested", "not_applicable")
+    )
     lines.append("")
     if d["verdict"] == "certified":
         lines.append(
@@ -46,9 +70,6 @@ def certificate_markdown(cert: Any) -> str:
         lines.append("What the verdict rests on:")
         lines.append("")
         lines.extend(f"* {r}" for r in d["verdict_reasons"])
-    if d.get("parts"):
-        lines.append("")
-        lines.append("Parts: " + "; ".join(f"{k}: {v['verdict']}" for k, v in d["parts"].items()))
     if d["estimated_constants"]:
         lines.append("")
         lines.append(

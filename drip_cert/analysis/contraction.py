@@ -68,8 +68,10 @@ __all__ = [
 DEFAULT_TOL = 1e-3
 #: budget of sub-boxes for branch and bound
 DEFAULT_MAX_BOXES = 20_000
-#: wall-time budget of branch and bound (about 1-5 ms per sub-box for n = 2..4 in pure Python)
-DEFAULT_MAX_TIME_S = 30.0
+#: wall-time guard of branch and bound: none. The searches stop on a count of work (``max_boxes``)
+#: so that the same inputs give the same rate on any machine; a finite guard, when a caller sets
+#: one and it fires, makes the result depend on the machine's speed (``stop == 'max_time'``)
+DEFAULT_MAX_TIME_S = math.inf
 
 JacobianFn = Callable[[np.ndarray, np.ndarray], np.ndarray]
 
@@ -132,7 +134,11 @@ class ContractionResult:
     n_boxes
         Sub-boxes evaluated by branch and bound.
     time_s
-        Wall time.
+        Wall time (a timing: kept out of the certificate's reproducible part).
+    stop
+        Why the search stopped: ``'exact'`` (closed form), ``'sampled'`` (an estimate), or the
+        branch and bound's reason (``'converged'``, ``'max_boxes'``, ``'min_width'``,
+        ``'max_time'``: the wall-time guard fired, so the rate depends on the machine's speed).
     note
         Free text (why a fallback happened, whether the gap met the tolerance, ...).
     """
@@ -148,6 +154,12 @@ class ContractionResult:
     n_boxes: int
     time_s: float
     note: str = ""
+    stop: str = "converged"
+
+    @property
+    def machine_dependent(self) -> bool:
+        """Whether the search stopped on wall time (its bound then depends on the machine)."""
+        return self.stop == "max_time"
 
     @property
     def holds(self) -> bool:
@@ -188,6 +200,7 @@ class ContractionResult:
             "witness": None if self.witness is None else [float(w) for w in self.witness],
             "tolerance": json_float(self.tolerance),
             "n_boxes": int(self.n_boxes),
+            "stop": self.stop,
             "time_s": float(self.time_s),
             "note": self.note,
             "holds": self.holds,
@@ -384,8 +397,9 @@ def contraction_rate(
     tol
         Absolute target gap between the sound upper bound and the sampled maximum of ``mu_2``.
     max_boxes, max_time_s
-        Budgets of branch and bound (sub-boxes, wall time); when one is spent the bound is still
-        sound, only looser, and the note says so.
+        Budgets of branch and bound: ``max_boxes`` (a count of work, what makes the result the
+        same on every machine) and an optional wall-time guard ``max_time_s`` (default none);
+        when one is spent the bound is still sound, only looser, and ``stop`` says which.
     sampling
         :class:`SamplingOptions` of the sampled estimate (its seed makes the result reproducible).
     mlps
@@ -424,6 +438,7 @@ def contraction_rate(
             witness=None,
             tolerance=0.0,
             n_boxes=0,
+            stop="exact",
             note="constant Jacobian (linear or affine closed loop): mu_2 = lambda_max(sym J) "
             "isolated exactly (rational characteristic polynomial, roots in Arb); the rate is "
             "the rigorous lower end",
@@ -498,6 +513,7 @@ def contraction_rate(
             witness=arg,
             tolerance=tol,
             n_boxes=0,
+            stop="sampled",
             note=(
                 "sampled estimate (grid + random + local search), NOT a bound"
                 + (f"; no sound enclosure: {reason}" if reason else "")
@@ -538,7 +554,7 @@ def contraction_rate(
     gap = ub - lb
     note = (
         f"sound bound {ub:.6g} vs sampled {lb:.6g}, gap {gap:.3g}"
-        + (" <= tol" if gap <= tol else f" > tol {tol:g}: budget spent ({n_boxes} boxes)")
+        + (" <= tol" if gap <= tol else f" > tol {tol:g}: {_spent(res.stop, n_boxes)}")
         + ("" if depends_x else "; J is independent of x, so the rate holds for all x")
     )
     if depends_x:
@@ -553,6 +569,7 @@ def contraction_rate(
         witness=witness,
         tolerance=tol,
         n_boxes=n_boxes,
+        stop=res.stop,
         note=note,
     )
 
@@ -596,7 +613,7 @@ def _mlp_bnb(
     gap = ub - lb
     note = (
         f"sound bound {ub:.6g} vs sampled {lb:.6g}, gap {gap:.3g}"
-        + (" <= tol" if gap <= tol else f" > tol {tol:g}: budget spent ({res.n_boxes} boxes)")
+        + (" <= tol" if gap <= tol else f" > tol {tol:g}: {_spent(res.stop, res.n_boxes)}")
         + f"; blocks {', '.join(dec.names)}; holds only on the box (the paper asks for all x)"
     )
     return _result(
@@ -609,6 +626,7 @@ def _mlp_bnb(
         witness=witness,
         tolerance=tol,
         n_boxes=res.n_boxes,
+        stop=res.stop,
         note=note,
     )
 
@@ -624,6 +642,7 @@ def _result(
     witness: Sequence[float] | np.ndarray | None,
     tolerance: float,
     n_boxes: int,
+    stop: str,
     note: str,
 ) -> ContractionResult:
     """The result of a method started at ``t0``: the rate is ``-upper`` for a bound (exact or
@@ -640,4 +659,17 @@ def _result(
         n_boxes=n_boxes,
         time_s=time.perf_counter() - t0,
         note=note,
+        stop=stop,
     )
+
+
+def _spent(stop: str, n_boxes: int) -> str:
+    """Which budget ended a search that did not meet its tolerance, for the note."""
+    if stop == "max_time":
+        return (
+            f"the wall-time guard fired after {n_boxes} boxes (this bound depends on the "
+            "machine's speed: raise or remove [contraction] max_time)"
+        )
+    if stop == "min_width":
+        return f"the sub-boxes reached the smallest width after {n_boxes} boxes"
+    return f"work budget spent ({n_boxes} boxes; raise [contraction] max_boxes)"

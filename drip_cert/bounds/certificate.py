@@ -38,7 +38,16 @@ from drip_cert.errors import AssumptionViolation, DripCertError
 from drip_cert.model.system import System, box_image
 from drip_cert.numerics.rounding import div_up, mul_up, up
 from drip_cert.progress import Stages
-from drip_cert.provenance import Check, How, Quantity, Scope, Verdict, json_float, verdict_of
+from drip_cert.provenance import (
+    Check,
+    How,
+    Quantity,
+    Scope,
+    Verdict,
+    json_float,
+    split_timings,
+    verdict_of,
+)
 from drip_cert.spec.load import Spec
 from drip_cert.spec.settings import ContractionSettings
 
@@ -182,6 +191,8 @@ class Certificate:
     extra_quantities: tuple[Quantity, ...] = ()  #: other inputs of the checks (h0, h1, gamma0)
     coordinates: CoordinateChange | None = None  #: None: computed in the user's x
     alternatives: tuple[Mapping[str, Any], ...] = ()  #: the other coordinates tried, in summary
+    #: the parts not computed: ``(part, "not_requested" | "not_applicable", reason)``
+    skipped: tuple[tuple[str, str, str], ...] = ()
 
     @property
     def verdict(self) -> Verdict:
@@ -199,15 +210,36 @@ class Certificate:
         return self.verdict == Verdict.CERTIFIED
 
     def part_verdicts(self) -> dict[str, dict[str, Any]]:
-        """The verdict of each part (``contraction``, ``tasil``, ``l1drac``) that was checked."""
+        """The verdict of every part (``contraction``, ``tasil``, ``l1drac``), named up front: a
+        part that was not computed is ``not_requested`` (the spec did not ask for it) or
+        ``not_applicable`` (the system has nothing it could be about), with the reason."""
         out: dict[str, dict[str, Any]] = {}
+        skipped = dict((part, (status, why)) for part, status, why in self.skipped)
         for part, ids in PARTS.items():
-            cs = [c for c in self.assumptions if c.id in ids]
-            if not any(c.id == ids[-1] for c in cs) and part != "contraction":
+            if part in skipped:
+                status, why = skipped[part]
+                out[part] = {"verdict": status, "reasons": [why]}
                 continue
-            v, why = verdict_of(cs)
-            out[part] = {"verdict": v.value, "reasons": list(why)}
+            v, why_v = verdict_of([c for c in self.assumptions if c.id in ids])
+            out[part] = {"verdict": v.value, "reasons": list(why_v)}
         return out
+
+    @property
+    def rho_certified(self) -> bool:
+        """Whether ``rho = rho_TaSIL + rho_L1`` is certified: both parts computed and certified
+        (a radius with one part missing is no bound on the total gap)."""
+        parts = self.part_verdicts()
+        return all(parts[p]["verdict"] == Verdict.CERTIFIED.value for p in ("tasil", "l1drac"))
+
+    @property
+    def machine_dependent(self) -> tuple[str, ...]:
+        """The searches that stopped on a wall-time guard (their bounds depend on the machine's
+        speed); empty when the certificate is a function of its inputs alone."""
+        out = []
+        for name, a in (("expert", self.contraction_expert), ("learned", self.contraction_learned)):
+            if a is not None and a.euclidean.machine_dependent:
+                out.append(f"contraction of the {name} closed loop ({a.euclidean.n_boxes} boxes)")
+        return tuple(out)
 
     @property
     def estimated(self) -> tuple[str, ...]:
@@ -307,6 +339,7 @@ class Certificate:
             "rho_tasil": json_float(self.rho_tasil) if self.rho_tasil is not None else None,
             "rho_l1": json_float(self.rho_l1) if self.rho_l1 is not None else None,
             "rho_total": json_float(self.rho) if self.rho is not None else None,
+            "certified": self.rho_certified,
             "coordinates": "x (the spec's states)",
             "source": "DRIP eq. (TotalTIG): rho = rho_TaSIL + rho_L1",
             "note": "rho_TaSIL is a (1 - delta) radius of max_t ||x'_t - x*_t||, rho_L1 an L_2p "
@@ -314,7 +347,8 @@ class Certificate:
             "validate checks each part with the statistic it bounds",
         }
         verdict, reasons = verdict_of(self.assumptions)
-        return {
+        machine = self.machine_dependent
+        out = {
             "schema_version": SCHEMA_VERSION,
             "system": self.system.to_dict(),
             "verdict": verdict.value,
@@ -338,7 +372,20 @@ class Certificate:
             "rho": rho,
             "coordinates": self._coordinates_dict(),
             "notes": list(self.notes),
+            "reproducible": {
+                "machine_independent": not machine,
+                "stopped_on_time": list(machine),
+                "note": "every search stops on a count of work (boxes, evaluations, steps): the "
+                "same inputs give the same certificate on any machine, apart from the wall-clock "
+                "measurements under 'timings'"
+                if not machine
+                else "a wall-time guard fired: the searches listed stopped on time, so their "
+                "bounds (and what rests on them) depend on this machine's speed and load; "
+                "remove [contraction] max_time for a reproducible certificate",
+            },
         }
+        out["timings"] = split_timings(out)
+        return out
 
     def _coordinates_dict(self) -> dict[str, Any]:
         """Which coordinates the numbers live in, and the conversion (schema 3)."""
@@ -372,9 +419,11 @@ class Certificate:
 
 EST_RATE_FLOOR = 2.0**-52  #: smallest sampled rate a conditional L1-DRAC design is built on
 
-SCHEMA_VERSION = 3
+SCHEMA_VERSION = 4
 """Version of :meth:`Certificate.to_dict`'s layout (2: ``verdict``, ``parts``, scopes; 3:
-``coordinates``: the certificate may be computed in metric coordinates z, ``rho`` is in x)."""
+``coordinates``: the certificate may be computed in metric coordinates z, ``rho`` is in x; 4:
+every part named in ``parts`` (``not_requested`` / ``not_applicable`` with the reason),
+``rho.certified``, wall-clock fields moved under ``timings``, ``reproducible``)."""
 
 
 def _rate_check(cid: str, r: Any, what: str, source: str) -> Check:
@@ -555,10 +604,7 @@ def _certify_in_metric(
         ctab["region"] = [list(b) for b in box_image(Th, ctab["region"])]
     zspec = Spec(spec.path, zsys, tables, expert_gain=spec.expert_gain)  # its note is about x
     demos = demonstrations
-    wants = spec.system.learned is not None and (
-        "tasil" in spec.settings.present or demonstrations is not None
-    )
-    if demos is None and wants:
+    if demos is None and spec.system.learned is not None:
         from drip_cert.learn.imitation import demonstration_set  # jax: keep off the API's path
 
         demos = demonstration_set(spec.system, spec.settings.tasil)
@@ -670,12 +716,18 @@ def _certify_in(spec: Spec, demonstrations: DemonstrationSet | None, stage: Stag
         strict=True,
         source="L1-DRAC Assumption 7",
     )
+    skipped: list[tuple[str, str, str]] = []
     if wants_l1:
         checks.append(a7.with_scope(*_sde_scope(a7.scope, s.horizon)))
     else:
-        notes.append(
-            "no [l1drac] table: the L1-DRAC assumptions (2 for the learned loop, 7) are reported "
-            "under contraction and constants but are not part of the verdict"
+        skipped.append(
+            (
+                "l1drac",
+                "not_requested",
+                "no [l1drac] table: the L1-DRAC part (rho_L1) was not computed; its assumptions "
+                "(2 for the learned loop, 7) are reported under contraction and constants but "
+                "are not part of the verdict; add an [l1drac] table to certify it",
+            )
         )
 
     diss = None
@@ -695,8 +747,33 @@ def _certify_in(spec: Spec, demonstrations: DemonstrationSet | None, stage: Stag
 
     tasil_prov: dict[str, Any] = {}
     tasil = None
-    wants_tasil = "tasil" in settings.present or demonstrations is not None
-    if s.learned is not None and wants_tasil and gamma0 is not None:
+    if s.learned is None:
+        skipped.append(
+            (
+                "tasil",
+                "not_applicable",
+                "no learned policy ([policy] learned or [tasil] policy): there is no imitation "
+                "gap to bound",
+            )
+        )
+    elif "tasil" not in settings.present:
+        notes.append(
+            "no [tasil] table: the TaSIL part is computed with the default settings "
+            f"({_tasil_defaults_text(settings.tasil)})"
+        )
+    if s.learned is not None and gamma0 is None:
+        # no bound on the imitation gap without the expert's contraction: the part fails
+        checks.append(
+            Check.derive(
+                "TaSIL",
+                False,
+                "rho_TaSIL not computed: the expert closed loop is not shown to contract (DRIP "
+                "Assumption 2), so there is no delta-ISS gain to carry the policy error",
+                inputs=[lam_ex],
+                source="DRIP Theorem thm:TaSIL",
+            )
+        )
+    if s.learned is not None and gamma0 is not None:
         from drip_cert.bounds.tasil.section import (  # jax: keep off the API's import path
             tasil_section,
         )
@@ -830,6 +907,15 @@ def _certify_in(spec: Spec, demonstrations: DemonstrationSet | None, stage: Stag
         notes=tuple(notes),
         invariance=inv,
         extra_quantities=tuple(extra_q),
+        skipped=tuple(skipped),
+    )
+
+
+def _tasil_defaults_text(st: Any) -> str:
+    """The TaSIL settings a certificate without a ``[tasil]`` table uses, as text."""
+    return (
+        f"n = {st.trajectories} demonstrations, heldout = {st.heldout}, k = {st.samples} samples, "
+        f"delta = {st.delta:g}, seed = {st.seed}; add a [tasil] table to change them"
     )
 
 

@@ -55,6 +55,7 @@ __all__ = [
     "clopper_pearson_upper",
     "finalize",
     "map_sequential",
+    "min_trials_zero_failures",
     "new_sums",
     "norms_sequential",
     "t_interval",
@@ -297,6 +298,30 @@ def _proved_upper(k: int, n: int, candidate: float, tail: arb) -> float:
         p = up(p * (1.0 + step))
         step *= 10.0
     return 1.0
+
+
+def min_trials_zero_failures(target: float, alpha: float) -> int:
+    """The smallest ``n`` at which ``k = 0`` failures in ``n`` trials give the sound one-sided
+    Clopper-Pearson bound ``clopper_pearson_upper(0, n, alpha=alpha, sound=True) <= target``.
+
+    With fewer trials no outcome at all can bring the bound to ``target`` (the bound is smallest
+    at ``k = 0`` and decreases in ``n``): a check that needs it is impossible. The closed form
+    ``1 - alpha^{1/n} <= target`` gives ``n >= log(alpha) / log(1 - target)``; the count is then
+    confirmed (and raised where rounding needs it) with the sound bound itself.
+
+    Examples
+    --------
+    >>> min_trials_zero_failures(0.05, 0.05)  # the held-out form at delta = 0.1
+    59
+    """
+    if not (0.0 < target < 1.0 and 0.0 < alpha < 1.0):
+        raise SpecError(f"target and alpha must lie in (0, 1), got {target!r}, {alpha!r}")
+    n = max(1, math.floor(math.log(alpha) / math.log1p(-target)))
+    while float(clopper_pearson_upper(0, n, alpha=alpha, sound=True)) > target:
+        n += 1
+    while n > 1 and float(clopper_pearson_upper(0, n - 1, alpha=alpha, sound=True)) <= target:
+        n -= 1
+    return n
 
 
 def clopper_pearson_upper(

@@ -4,7 +4,7 @@ Two layouts ship as package data (JSON Schema, draft 2020-12):
 
 * ``certificate.schema.json``: :meth:`Certificate.to_dict
   <drip_cert.bounds.certificate.Certificate.to_dict>`, i.e. ``drip-cert certify --json`` and
-  ``certificate.json`` (``schema_version`` 3);
+  ``certificate.json`` (``schema_version`` 4);
 * ``validation.schema.json``: :meth:`ValidationReport.to_dict
   <drip_cert.validate.run.ValidationReport.to_dict>`, i.e. ``drip-cert validate --json`` and
   ``validation.json`` (``schema_version`` 1); its ``certificate`` key holds a certificate in the

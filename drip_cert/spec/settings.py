@@ -403,7 +403,7 @@ class ContractionSettings:
     tol: float = 1e-3
     max_boxes: int = 4000
     metric: bool = True  #: search an LMI contraction metric (false only for "euclidean")
-    max_time: float = 20.0  #: seconds of interval branch and bound per closed loop
+    max_time: float = math.inf  #: optional wall-time guard (seconds); none by default
     coordinates: str = "auto"  #: "auto", "euclidean", "lmi" or "given" (a P in ``metric``)
     P: tuple[tuple[float, ...], ...] | None = None  #: the given metric
     given: frozenset[str] = field(default=frozenset(), compare=False, repr=False)
@@ -415,7 +415,9 @@ class ContractionSettings:
             "tol": "gap between the upper and lower bound of the interval branch and bound",
             "max_boxes": "largest number of boxes of the interval branch and bound",
             "metric": 'certify in metric coordinates: "auto", "euclidean", "lmi" or a matrix P',
-            "max_time": "seconds of branch and bound per closed loop",
+            "max_time": "optional wall-time guard of the branch and bound per closed loop "
+            "(seconds; default none): when it fires the rate depends on the machine's speed, "
+            "and the certificate says so; max_boxes is the budget that keeps it reproducible",
         }
     )
 
@@ -667,7 +669,9 @@ class TasilSettings:
     method: str = "tasil"  #: "tasil" | "bc"
     order: int = 1  #: derivative order of the TaSIL loss (1 or 2)
     trajectories: int = 20  #: the paper's n
-    heldout: int = 20  #: fresh expert trajectories for the held-out form (3.3 c); 0: none
+    #: fresh expert trajectories for the held-out form (3.3 c); 0: none; ``None``: the smallest
+    #: count at which that form can pass at ``delta`` (59 at delta = 0.1; :func:`heldout_default`)
+    heldout: int | None = None
     samples: int = 100  #: k of the uniform partition of [0, T]
     hidden: tuple[int, ...] = (64, 64)
     activation: str = "tanh"
@@ -689,7 +693,8 @@ class TasilSettings:
             "method": "the training loss",
             "order": "derivative order of the TaSIL loss",
             "trajectories": "number n of expert demonstrations",
-            "heldout": "fresh expert trajectories for the held-out form; 0 for none",
+            "heldout": "fresh expert trajectories for the held-out form; 0 for none; default "
+            "the smallest count at which that form can pass at delta (59 at delta = 0.1)",
             "samples": "samples k per trajectory on [0, T]",
             "hidden": "hidden layer widths of the policy MLP",
             "activation": "activation of the policy MLP (smooth)",
@@ -706,6 +711,10 @@ class TasilSettings:
             "max_heldout_gap": "training fails when the held-out mean gap exceeds this",
         }
     )
+
+    def __post_init__(self) -> None:
+        if self.heldout is None:
+            object.__setattr__(self, "heldout", heldout_default(self.delta))
 
     @classmethod
     def from_table(
@@ -735,6 +744,16 @@ class TasilSettings:
             max_heldout_gap=r.get("max_heldout_gap", positive_or_inf, d["max_heldout_gap"]),
             given=r.given,
         )
+
+
+def heldout_default(delta: float) -> int:
+    """The default ``[tasil] heldout``: the smallest number of held-out trajectories at which the
+    held-out form (docs/math/tasil.md 3.3 c) can pass at ``delta``: with no trajectory exceeding
+    ``tau``, the sound one-sided Clopper-Pearson bound at confidence ``1 - delta/2`` must reach
+    ``delta/2`` (:func:`~drip_cert.numerics.stats.min_trials_zero_failures`)."""
+    from drip_cert.numerics.stats import min_trials_zero_failures  # scipy: off the CLI start-up
+
+    return min_trials_zero_failures(delta / 2.0, delta / 2.0)
 
 
 # ------------------------------------------------------------------------------ [simulation]

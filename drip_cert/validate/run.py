@@ -21,6 +21,7 @@ from typing import Any
 
 from drip_cert.errors import SpecError
 from drip_cert.model.system import System
+from drip_cert.provenance import split_timings
 from drip_cert.spec.settings import SimSettings
 from drip_cert.validate.checks import (
     HOLDS,
@@ -42,7 +43,8 @@ from drip_cert.validate.scenarios import (
 
 __all__ = ["VALIDATION_SCHEMA_VERSION", "ShortHorizonRun", "ValidationReport", "validate"]
 
-VALIDATION_SCHEMA_VERSION = 1
+VALIDATION_SCHEMA_VERSION = 2
+"""2: the embedded certificate in layout 4; wall-clock fields under ``timings``."""
 """Version of :meth:`ValidationReport.to_dict`'s layout (described by
 ``drip_cert/schema/validation.schema.json``; adding a key needs no bump, removing, renaming or
 retyping one does)."""
@@ -119,7 +121,7 @@ class ValidationReport:
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready report (the keys of the ``validation.json`` file)."""
-        return {
+        out = {
             "schema_version": VALIDATION_SCHEMA_VERSION,
             "status": self.status,
             "holds": self.holds,
@@ -138,6 +140,8 @@ class ValidationReport:
             "simulation": self.result.to_dict(),
             "notes": list(self.notes),
         }
+        out["timings"] = split_timings(out)  # the certificate keeps its own under its key
+        return out
 
 
 def validate(

@@ -23,7 +23,7 @@ import numpy as np
 from drip_cert.bounds.tasil._common import check_le, positive, probability, up_closed_form
 from drip_cert.bounds.tasil.lemma import imitation_gap_lemma
 from drip_cert.errors import SpecError
-from drip_cert.numerics.stats import clopper_pearson_upper
+from drip_cert.numerics.stats import clopper_pearson_upper, min_trials_zero_failures
 from drip_cert.provenance import Check, How, json_float
 
 __all__ = [
@@ -306,6 +306,13 @@ def form_held_out(
         note += f" (comparison bound of the learned loop; the lemma gives {lem.bound:.4g})"
     elif not lem.holds:
         note += f"; lemma fails at tau: {lem.reason}"
+    need = min_trials_zero_failures(delta / 2.0, delta / 2.0)
+    if n_val < need:
+        note += (
+            f"; with {n_val} held-out trajectories this form can never pass at delta = "
+            f"{delta:g} (even with none exceeding tau the bound stays above delta/2): set "
+            f"[tasil] heldout >= {need}"
+        )
     return TasilForm("held_out", value, holds, eps >= 1.0 or not finite, note, eps, checks)
 
 
