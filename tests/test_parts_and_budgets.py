@@ -25,9 +25,8 @@ from tests.helpers import two_state_spec, write_spec
 
 #: a linear loop whose learned policy is 50 % off the expert's gains; no [tasil] table
 OFF_BY_HALF = (
-    two_state_spec("off-by-half", uncertainty=False).replace(
-        'expert = ["-x1 - 2*x2"]', 'expert = ["-x1 - 2*x2"]\nlearned = ["-1.5*x1 - 3*x2"]'
-    )
+    two_state_spec("off-by-half", uncertainty=False)
+    .replace('expert = ["-x1 - 2*x2"]', 'expert = ["-x1 - 2*x2"]\nlearned = ["-1.5*x1 - 3*x2"]')
     # linear dynamics: every rate is exact and the certificate takes a few seconds
     .replace('"-x1 - x2**3"', '"-x1 - x2"')
 )
