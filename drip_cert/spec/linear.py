@@ -137,9 +137,9 @@ def read_number_matrix(
                 )
             try:
                 out_row.append(exact_number(v))  # a TOML float: the rational of its text
-            except ValueError as exc:
-                entry = Field(fld.table, f"{fld.key}[{i}][{j}]", fld.path, fld.meaning)
-                raise entry.error(v, _ENTRY_RULE, str(exc)) from None
+            except ValueError as exc:  # an exponent beyond MAX_LITERAL_EXPONENT
+                key = f"{fld.key}[{i}][{j}]"
+                raise SpecError(str(exc), field=f"{fld.table}.{key}", path=fld.path) from None
         out.append(tuple(out_row))
     return tuple(out)
 
