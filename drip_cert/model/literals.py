@@ -3,8 +3,9 @@
 A certificate's "exact" route (for instance the exact ``mu_2`` of a constant closed-loop
 Jacobian) is only as exact as its coefficients. A decimal literal with more digits than a double
 holds, such as ``0.6546960439030461848070769``, differs from the double nearest to it by up to
-half an ulp (here ``4.2e-17``), and from that double's shortest text ``0.6546960439030461`` by as
-much: a loop whose exact ``mu_2`` is ``+8.4e-27`` would look contracting at rate ``8.5e-17``.
+half an ulp (here ``4.2e-17``), and that double's shortest text ``0.6546960439030461`` lies
+``8.5e-17`` below it: a loop whose exact ``mu_2`` is ``+8.4e-27`` looked contracting at rate
+``8.5e-17``.
 So a literal becomes the rational of its own text, digit for digit:
 
 * :func:`exact_decimal` turns the text of a decimal literal (``0.1``, ``1e-3``, ``2.5E+10``,
