@@ -25,7 +25,8 @@ from drip_cert.analysis.lognorm import mu_2, mu_2_weighted, spectral_abscissa
 from drip_cert.errors import SpecError
 from drip_cert.numerics.interval import UnsupportedExpression
 from drip_cert.provenance import How
-from tests.helpers import CLOSED_FORM_TOL
+from drip_cert.spec import load_spec
+from tests.helpers import CLOSED_FORM_TOL, write_spec
 
 #: the branch-and-bound default: the sound rate is within this of the sampled one
 BNB_TOL = DEFAULT_TOL
@@ -241,3 +242,46 @@ def test_block_function_subclasses_are_sampled_or_enclosed():
     sound = contraction_rate(J, [x1, x2], box, J_num=J_num, enclose=enclose)
     truth = -_mu2_2x2(-2.0, 0.5, 0.0, -1.0)  # largest coupling at x2 = 0
     assert sound.how == How.SOUND and sound.rate <= truth <= est.rate + CLOSED_FORM_TOL
+
+
+# ------------------------------------------------------- literals read exactly (issue 22, 2)
+#: 25 digits; its double is 0.65469604390304614..., whose shortest repr 0.6546960439030461 is
+#: 8.5e-17 below the number written
+DIGITS_25 = "0.6546960439030461848070769"
+#: the loop's exact mu_2: the expert's gain is DIGITS_25 - 8.4e-27 (28 digits)
+MU2_EXACT = sp.Rational(84, 10**28)
+#: the exact route's rate is the float of an Arb-isolated root of a rational polynomial: ulps
+EXACT_RATE_RTOL = 1e-14
+_ONE_STATE = """
+[system]
+name = "digits"
+states = ["x1"]
+inputs = ["u"]
+horizon = 1.0
+[initial]
+support = [[-0.2, 0.2]]
+"""
+
+
+@pytest.mark.parametrize(
+    "model",
+    [
+        # expressions: the 25-digit literal in f, the gain as an exact integer ratio
+        f'[dynamics]\nf = ["{DIGITS_25}*x1"]\ng = [["1"]]\n'
+        '[policy]\nexpert = ["-6546960439030461848070768916/10**28*x1"]\n',
+        # a linear model: both as TOML floats (the 28-digit gain rounds to the same double)
+        f"[dynamics]\nA = [[{DIGITS_25}]]\nB = [[1]]\n"
+        "[policy]\nexpert = { K = [[0.6546960439030461848070768916]] }\n",
+    ],
+    ids=["expressions", "toml-floats"],
+)
+def test_a_loop_with_exact_mu2_above_zero_is_not_contracting(tmp_path, model):
+    """mu_2 = +8.4e-27 exactly: the exact route must say "not contracting" (rate -8.4e-27 < 0).
+    Rounding the literals to doubles (or their repr) first gave the rate +8.5e-17 or 0."""
+    system = load_spec(write_spec(tmp_path, _ONE_STATE + model)).system
+    J = system.closed_loop_jacobian("expert")
+    assert J == sp.Matrix([[MU2_EXACT]])
+    r = contraction_rate(J, system.states)
+    assert r.how == How.EXACT and r.method == "exact-linear"
+    assert r.rate < 0
+    assert r.rate == pytest.approx(-float(MU2_EXACT), rel=EXACT_RATE_RTOL)

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import builtins
+import copy
+import pickle
 
 import pytest
 import sympy as sp
@@ -12,6 +14,12 @@ from hypothesis import strategies as st
 from drip_cert.errors import SpecError
 from drip_cert.model.blocks import mlp_block
 from drip_cert.model.expr import parse_expression
+from drip_cert.model.literals import (
+    MAX_LITERAL_EXPONENT,
+    DecimalFloat,
+    exact_decimal,
+    exact_number,
+)
 from drip_cert.model.mlp import init_mlp
 
 X1, X2 = sp.symbols("x1 x2", real=True)
@@ -34,6 +42,99 @@ def test_arithmetic_and_functions_become_exact_sympy():
 def test_float_literals_are_exact_decimals():
     # 0.1 + 0.2 == 0.3 exactly as rationals (not as binary floats)
     assert parse("0.1 + 0.2") == sp.Rational(3, 10)
+
+
+#: a 25-digit literal: its double is 0.65469604390304614..., whose repr is 0.6546960439030461
+DIGITS_25 = "0.6546960439030461848070769"
+
+
+@pytest.mark.parametrize(
+    "text, exact",
+    [
+        (DIGITS_25, sp.Rational(6546960439030461848070769, 10**25)),
+        ("1e-3", sp.Rational(1, 1000)),
+        ("2.5E+10", sp.Integer(25_000_000_000)),
+        ("1_000.5", sp.Rational(2001, 2)),
+        ("1.", sp.Integer(1)),
+        (".5", sp.Rational(1, 2)),
+        ("1e1_0", sp.Integer(10**10)),
+        (
+            "0.1000000000000000055511151231257827",
+            sp.Rational(1000000000000000055511151231257827, 10**34),
+        ),
+        ("1e-400", sp.Rational(1, 10**400)),  # below the smallest double: was 0
+        ("12345678901234567890123.5e-30", sp.Rational(123456789012345678901235, 10**31)),
+    ],
+)
+def test_float_literal_is_the_rational_of_its_source_text(text, exact):
+    """Every digit written counts: the literal is not rounded to a double (nor to its repr)."""
+    assert parse(text) == exact
+    assert parse(f"-{text}*x1") == -exact * X1
+
+
+def test_literal_text_is_found_after_non_ascii_names_and_line_breaks():
+    # ast offsets count UTF-8 bytes: a 2-byte name before the literal must not shift its text
+    theta = sp.Symbol("\u03b8", real=True)
+    e = parse_expression(
+        f"\u03b8\u03b8 * \u03b8 + {DIGITS_25}",
+        field="f",
+        scalars={"\u03b8\u03b8": X1, "\u03b8": theta},
+    )
+    assert e == X1 * theta + sp.Rational(6546960439030461848070769, 10**25)
+    assert (
+        parse(f"(x1 +\r\n  {DIGITS_25}\n * x2)")
+        == X1 + sp.Rational(6546960439030461848070769, 10**25) * X2
+    )
+
+
+@given(
+    st.integers(0, 10**40),
+    st.integers(0, 40),
+    st.integers(-330, 260),  # 10^40 * 10^260 stays below the largest double
+    st.sampled_from(["e", "E"]),
+)
+def test_float_literals_are_exact_for_any_digits_and_exponent(mantissa, point, exp10, e):
+    """Property: ``d1...dk.dk+1...dn e E`` parses to mantissa / 10^point * 10^E exactly."""
+    digits = str(mantissa).rjust(point + 1, "0")
+    text = f"{digits[: len(digits) - point]}.{digits[len(digits) - point :]}{e}{exp10:+d}"
+    assert parse(text) == sp.Rational(mantissa, 10**point) * sp.Rational(10) ** exp10
+
+
+def test_numbers_given_as_values_are_exact():
+    # a TOML float keeps its text (DecimalFloat); a bare Python float is the double it stores
+    assert parse(DecimalFloat(DIGITS_25)) == sp.Rational(6546960439030461848070769, 10**25)
+    assert parse(DecimalFloat("1_000.5")) == sp.Rational(2001, 2)
+    assert parse(0.1) == sp.Rational(3602879701896397, 2**55) != sp.Rational(1, 10)
+    assert parse(float(DIGITS_25)) == sp.Rational(float(DIGITS_25))
+    assert parse(7) == sp.Integer(7)
+
+
+def test_decimal_float_is_the_double_and_survives_pickle_and_copy():
+    v = DecimalFloat(DIGITS_25)
+    assert v == float(DIGITS_25) and repr(v) == repr(float(DIGITS_25))
+    assert type(v + 0.0) is float  # arithmetic forgets the text
+    for w in (pickle.loads(pickle.dumps(v)), copy.deepcopy(v)):
+        assert type(w) is DecimalFloat and w.text == DIGITS_25 and w == v
+
+
+@pytest.mark.parametrize("text", ["1e-100000000", "-1.5e-2000", "1e-1001"])
+def test_literal_exponent_beyond_the_bound_is_refused(text):
+    # an unbounded exponent would be an unbounded integer (10^10^8 is 40 MB): refused, named
+    with pytest.raises(SpecError, match=f"exponent beyond \\+-{MAX_LITERAL_EXPONENT}") as info:
+        parse(text)
+    assert "dynamics.f[0]" in str(info.value)
+
+
+def test_literal_exponent_at_the_bound_is_read_exactly():
+    assert parse(f"1e-{MAX_LITERAL_EXPONENT}") == sp.Rational(1, 10**MAX_LITERAL_EXPONENT)
+
+
+def test_exact_decimal_refuses_non_numbers():
+    for bad in ("nan", "inf", "x", "1..2"):
+        with pytest.raises(ValueError):
+            exact_decimal(bad)
+    with pytest.raises(ValueError, match="finite"):
+        exact_number(float("inf"))
 
 
 def test_norm_of_state_vector_and_scalars():

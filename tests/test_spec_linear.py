@@ -62,6 +62,15 @@ def test_linear_model_takes_a_known_diffusion(tmp_path):
     )
 
 
+def test_toml_floats_are_the_rationals_of_their_text(tmp_path):
+    # tomllib gives doubles; the loader keeps each float's text, so every digit written counts
+    dyn = "[dynamics]\nA = [[0, 1], [-2, -0.6546960439030461848070769]]\nB = [[0], [1_0.5e-1]]\n"
+    s = load(tmp_path, spec_text(dyn, expressions_policy("-x1"))).system
+    x1, x2 = s.states
+    assert list(s.f) == [x2, -2 * x1 - sp.Rational(6546960439030461848070769, 10**25) * x2]
+    assert s.g[1, 0] == sp.Rational(105, 100)
+
+
 def test_gain_expert_is_minus_K_x(tmp_path):
     policy = "[policy]\nexpert = { K = [[2, 0.5]] }\n"
     spec = load(tmp_path, spec_text(LINEAR, policy))
@@ -226,6 +235,12 @@ BAD = [
         LQR.replace("Q = [[1, 0], [0, 1]]", "Q = [[0, 0], [0, 0]]"),
         "policy.lqr.Q",
         "unobservable",
+    ),
+    (
+        "[dynamics]\nA = [[0, 1], [-2, -3e-2000]]\nB = [[0], [1]]\n",
+        LQR,
+        "dynamics.A[1][1]",
+        "'-3e-2000' has a decimal exponent beyond",
     ),
     ('[dynamics]\nf = ["x2", "1 - x1"]\ng = [["0"], ["1"]]\n', LQR, "policy.expert", "f(0) = "),
     (

@@ -3,7 +3,9 @@
 A specification file must never be able to run code, so user text is never given to ``eval``,
 ``sympify`` or ``parse_expr``. :func:`parse_expression` walks the syntax tree and accepts only
 
-* numbers (int and float literals; floats become exact rationals of their decimal text),
+* numbers (int and float literals; a float literal becomes the exact rational of its source
+  text, digit for digit: ``0.6546960439030461848070769`` keeps all 25 digits, ``1e-3`` is
+  ``1/1000``; see :mod:`drip_cert.model.literals`),
 * the declared scalar symbols (states, time) and the constants ``pi`` and ``E``,
 * ``+ - * / **`` and unary ``-``/``+``,
 * calls of :data:`FUNCTIONS` (``norm`` takes the state vector name or scalars),
@@ -19,12 +21,14 @@ that names the field, the offending text and what is allowed.
 from __future__ import annotations
 
 import ast
+import re
 from collections.abc import Callable, Mapping, Sequence
 
 import sympy as sp
 
 from drip_cert.errors import SpecError
 from drip_cert.model.blocks import Block
+from drip_cert.model.literals import DecimalFloat, exact_decimal, exact_number
 
 #: Elementary functions accepted in expressions, with their sympy counterparts.
 FUNCTIONS: Mapping[str, Callable[..., sp.Expr]] = {
@@ -43,6 +47,7 @@ FUNCTIONS: Mapping[str, Callable[..., sp.Expr]] = {
 _UNARY = ("sin", "cos", "tan", "exp", "log", "sqrt", "tanh", "abs", "Abs")
 CONSTANTS: Mapping[str, sp.Expr] = {"pi": sp.pi, "E": sp.E}
 MAX_LENGTH = 20_000  #: longest expression text accepted (guards the parser's recursion)
+_NEWLINE = re.compile(r"\r\n|\r|\n")  # the line breaks of Python's tokenizer (ast line numbers)
 _ALLOWED_HELP = (
     "allowed: numbers, the declared symbols {symbols}, + - * / **, unary minus, "
     "the functions " + ", ".join(FUNCTIONS) + ", norm(x), pi, E{blocks}"
@@ -64,7 +69,9 @@ def parse_expression(
     Parameters
     ----------
     text
-        The expression text (a number is accepted too).
+        The expression text, or a number: an ``int``; a
+        :class:`~drip_cert.model.literals.DecimalFloat` (a TOML float with its text), parsed as
+        its text; any other ``float``, taken as the exact binary rational of the double.
     field
         Where it came from, e.g. ``"dynamics.f[1]"``; used in error messages.
     scalars
@@ -84,8 +91,13 @@ def parse_expression(
     blocks = dict(blocks or {})
     if isinstance(text, bool):
         raise SpecError(f"expected an expression, got the boolean {text!r}", field=field, path=path)
-    if isinstance(text, int | float):
-        text = repr(text)
+    if isinstance(text, DecimalFloat):
+        text = text.text
+    elif isinstance(text, int | float):
+        try:
+            return exact_number(text)
+        except ValueError as exc:
+            raise SpecError(str(exc), field=field, path=path) from None
     if not isinstance(text, str):
         raise SpecError(
             f"expected an expression string, got {type(text).__name__} {text!r}",
@@ -96,12 +108,13 @@ def parse_expression(
         raise SpecError("empty expression", field=field, path=path)
     if len(text) > MAX_LENGTH:
         raise SpecError(f"expression longer than {MAX_LENGTH} characters", field=field, path=path)
+    source = text.strip()
     try:
-        tree = ast.parse(text.strip(), mode="eval")
+        tree = ast.parse(source, mode="eval")
     except (SyntaxError, ValueError, RecursionError, MemoryError) as exc:
         msg = getattr(exc, "msg", None) or type(exc).__name__
         raise SpecError(f"cannot parse {text!r}: {msg}", field=field, path=path) from None
-    parser = _Parser(text, field, path, dict(scalars), vector_name, tuple(vector), blocks)
+    parser = _Parser(source, field, path, dict(scalars), vector_name, tuple(vector), blocks)
     try:
         out = parser.visit(tree.body)
     except RecursionError:
@@ -120,6 +133,8 @@ def parse_expression(
 class _Parser:
     """Recursive walk over an expression AST that builds sympy objects."""
 
+    _lines: list[bytes] | None
+
     def __init__(self, text, field, path, scalars, vector_name, vector, blocks):
         self.text = text
         self.field = field
@@ -128,6 +143,7 @@ class _Parser:
         self.vector_name = vector_name if vector else None
         self.vector = vector
         self.blocks = blocks
+        self._lines = None  # the source's lines as UTF-8 bytes, split at the first float
 
     def fail(self, what: str) -> SpecError:
         names = ", ".join(sorted(self.scalars)) or "(none)"
@@ -155,8 +171,24 @@ class _Parser:
         if isinstance(v, float):
             if v != v or v in (float("inf"), float("-inf")):
                 raise self.fail("NaN or infinite literal")
-            return sp.Rational(repr(v))
+            return self._exact_float(node)
         return sp.Integer(v)
+
+    def _exact_float(self, node: ast.Constant) -> sp.Expr:
+        """The exact rational of a float literal's source text (``ast`` keeps only its double)."""
+        if self._lines is None:
+            self._lines = [line.encode() for line in _NEWLINE.split(self.text)]
+        # col_offset / end_col_offset count UTF-8 bytes; a number token lies on one line
+        line = self._lines[node.lineno - 1]
+        literal = line[node.col_offset : node.end_col_offset].decode()
+        if float(literal) != node.value:  # the token and the value ast gave must agree
+            raise RuntimeError(
+                f"internal error: literal text {literal!r} does not match {node.value!r}"
+            )
+        try:
+            return exact_decimal(literal)
+        except ValueError as exc:
+            raise self.fail(str(exc)) from None
 
     def visit_Name(self, node: ast.Name):
         name = node.id

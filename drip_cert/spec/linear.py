@@ -9,12 +9,13 @@
   (:func:`scipy.linalg.solve_continuous_are`), designed on ``(A, B)`` or, when the dynamics are
   expressions, on their linearisation at ``x = 0`` (``A = df/dx(0)``, ``B = g``).
 
-Every number is read exactly: a TOML decimal becomes the rational of its decimal text (``0.1`` is
-``1/10``, as in expressions). The LQR gain is a float matrix from the Riccati solver; its entries
-are taken as the exact rationals of those floats, so the expert in the :class:`System` is exactly
-the policy that is certified, and :class:`ExpertGain` records where ``K`` came from (``Q``,
-``R``, the closed-loop eigenvalues). Every bad value is a :class:`~drip_cert.errors.SpecError`
-naming the file, ``table.key``, the value and the fix.
+Every number is read exactly: a TOML decimal becomes the rational of its decimal text, digit for
+digit (``0.1`` is ``1/10``, ``0.6546960439030461848070769`` keeps its 25 digits, as in
+expressions; :mod:`drip_cert.model.literals`). The LQR gain is a float matrix from the Riccati
+solver; its entries are taken as the exact rationals of those floats, so the expert in the
+:class:`System` is exactly the policy that is certified, and :class:`ExpertGain` records where
+``K`` came from (``Q``, ``R``, the closed-loop eigenvalues). Every bad value is a
+:class:`~drip_cert.errors.SpecError` naming the file, ``table.key``, the value and the fix.
 """
 
 from __future__ import annotations
@@ -30,6 +31,7 @@ import sympy as sp
 
 from drip_cert.errors import SpecError
 from drip_cert.model.blocks import block_applications
+from drip_cert.model.literals import exact_number
 from drip_cert.spec.settings import Field, TableReader, toml_text
 
 Rows = tuple[tuple[sp.Rational, ...], ...]
@@ -66,14 +68,6 @@ _K_KEYS = {"K": "gain of the expert u = -K x (scipy/MATLAB lqr sign), m x n"}
 
 
 # ------------------------------------------------------------------------------ reading numbers
-def exact_number(value: int | float) -> sp.Rational:
-    """The exact rational of a TOML number: an integer as is, a float as its shortest decimal
-    text (``0.1`` -> ``1/10``; the same rule as numbers in expressions)."""
-    if isinstance(value, int):
-        return sp.Integer(value)
-    return sp.Rational(repr(float(value)))
-
-
 def _example(rows: int, cols: int, identity: bool = False) -> str:
     """A TOML matrix literal of the right shape (identity or zeros), for fixes."""
     mat = [[(1 if identity and i == j else 0) for j in range(cols)] for i in range(rows)]
@@ -141,7 +135,11 @@ def read_number_matrix(
                     "write a number such as 0.5 (a matrix holds numbers; write a nonlinear or "
                     "symbolic model with the expressions f, g or an expert list instead)",
                 )
-            out_row.append(exact_number(v))
+            try:
+                out_row.append(exact_number(v))  # a TOML float: the rational of its text
+            except ValueError as exc:  # an exponent beyond MAX_LITERAL_EXPONENT
+                key = f"{fld.key}[{i}][{j}]"
+                raise SpecError(str(exc), field=f"{fld.table}.{key}", path=fld.path) from None
         out.append(tuple(out_row))
     return tuple(out)
 

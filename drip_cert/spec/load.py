@@ -26,6 +26,7 @@ import sympy as sp
 from drip_cert.errors import SpecError
 from drip_cert.model.blocks import Block, load_mlp_block
 from drip_cert.model.expr import CONSTANTS, FUNCTIONS, parse_expression
+from drip_cert.model.literals import DecimalFloat
 from drip_cert.model.system import System
 from drip_cert.spec.linear import ExpertGain, gain_expert, linear_dynamics, linearise, lqr_expert
 from drip_cert.spec.settings import TABLES, Settings, toml_text
@@ -123,7 +124,7 @@ def load_spec(path: str | Path) -> Spec:
         raise SpecError(f"specification file {spath!r} does not exist")
     try:
         with path.open("rb") as fh:
-            doc = tomllib.load(fh)
+            doc = tomllib.load(fh, parse_float=DecimalFloat)  # floats keep their text
     except tomllib.TOMLDecodeError as exc:
         raise SpecError(f"not valid TOML: {exc}", path=spath) from None
     except (OSError, UnicodeDecodeError) as exc:
