@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 import pytest
 import sympy as sp
 
@@ -115,3 +116,87 @@ def test_state_dependent_bounded_diffusion():
     ds = closed_loop_constants(_ou([[1 + sp.sin(x)]]), "expert", _lam(), True).Delta_star
     assert ds.how is How.SOUND
     assert math.sqrt(2.0) <= ds.value <= math.sqrt(2.0) * TIGHT_FACTOR_Q1
+
+
+# ----------------------------------------------------------------------------------------------
+# validation: with p != 0 the uncertainty gaps are measured against the nominal SDE (4b)
+
+SIM_PATHS = 64  #: paths of the engine runs below (the assertions are exact, not statistical)
+
+
+def _sim_model(p: float):
+    """dX = -X dt + p dW with pi_IL = pi* and no uncertainty: the true process IS (4b)."""
+    from drip_cert._jax import jnp
+    from drip_cert.model.numeric import make_model
+
+    return make_model(
+        1,
+        1,
+        1,
+        f=lambda t, x: 0.0 * x,
+        g=np.ones((1, 1)),
+        expert=lambda x: -x,
+        learned=lambda x: -x,
+        p=lambda t, x: p * jnp.ones((1, 1)),
+        name=f"ou-p{p}",
+    )
+
+
+def _sim(model, chunk_size: int = SIM_PATHS, extra: tuple[str, ...] = ("nominal_sde",)):
+    from drip_cert._jax import jax, jnp
+    from drip_cert.sim.config import DEFAULT_SCENARIOS, SimConfig
+    from drip_cert.sim.engine import simulate
+
+    cfg = SimConfig(
+        T=1.0,
+        dt=0.01,
+        n_paths=SIM_PATHS,
+        chunk_size=chunk_size,
+        seed=3,
+        scenarios=tuple(s for s in (*DEFAULT_SCENARIOS, *extra) if s != "learned_l1_true"),
+        record_every=10,
+    )
+
+    def x0(key):
+        return jax.random.uniform(key, (1,), minval=-R0, maxval=R0, dtype=jnp.float64)
+
+    return simulate(model, cfg, x0, progress=False)
+
+
+def test_the_nominal_sde_is_the_true_process_when_nothing_is_uncertain():
+    """pi_IL = pi*, no uncertainty, p = 2: the true process and (4b) coincide path by path (same
+    Brownian path), so the gap to the nominal SDE is exactly 0; to the ODE x' it is not (the
+    comparison 8844af7 made)."""
+    res = _sim(_sim_model(2.0))
+    sde = res.gap("uncertainty_true_sde")
+    assert sde.n == SIM_PATHS and np.all(sde.mean == 0.0) and np.all(sde.path_max == 0.0)
+    assert res.gap("uncertainty_true").max_mean > 0.5  # ~ E|N(0, 2)|: the noise itself
+
+
+def test_the_nominal_sde_changes_no_other_bit_and_not_with_chunking():
+    """Simulating (4b) as well leaves every other gap bit-identical, and its own gaps do not
+    depend on the chunk size."""
+    model = _sim_model(2.0)
+    with_sde = _sim(model)
+    without = _sim(model, extra=())
+    for g in without.gaps:
+        h = with_sde.gap(g.name)
+        for a, b in ((g.mean, h.mean), (g.moments, h.moments), (g.path_max, h.path_max)):
+            assert np.array_equal(a, b), g.name
+    chunked = _sim(model, chunk_size=7)
+    for g in with_sde.gaps:
+        h = chunked.gap(g.name)
+        assert np.array_equal(g.moments, h.moments) and np.array_equal(g.path_max, h.path_max)
+
+
+def test_validation_measures_the_l1_gap_against_the_nominal_sde():
+    """run_scenarios adds (4b) exactly when p != 0, and the L1 checks then read its gap."""
+    from drip_cert.validate.checks import uncertainty_gap_name
+    from drip_cert.validate.scenarios import scenarios_for
+
+    base = ("expert_nominal", "learned_nominal")
+    assert scenarios_for(_ou([[2]]), base) == (*base, "nominal_sde")
+    assert scenarios_for(_ou(None), base) == base
+    res = _sim(_sim_model(2.0))
+    assert uncertainty_gap_name(res, with_l1=False) == "uncertainty_true_sde"
+    assert uncertainty_gap_name(_sim(_sim_model(2.0), extra=()), False) == "uncertainty_true"
