@@ -24,6 +24,7 @@ MODULES = (
     "proofs_check.paper_example",
     "proofs_check.paper_text",
     "proofs_check.invariance",
+    "proofs_check.sde_moments",
     "proofs_check.coordinates",
     "proofs_check.implementation",
 )

@@ -135,3 +135,25 @@ def test_comparison_bound_check_holds_and_fails_on_a_smaller_bound():
     assert ok.verdict is Verdict.PASS and ok.residual > -1e-6  # attained: the ratio reaches 1
     res = check_comparison_bound(_ctx("tasil.comparison_bound"), factor=0.99)
     assert res.verdict is Verdict.FAIL and res.residual > 0
+
+
+def test_sde_moment_bound_covers_ou_and_fails_when_smaller():
+    """contraction.md Prop. 6.5: the bound covers the OU moments, is attained (q = 1), and fails
+    when taken 1 % smaller or without the diffusion (the deterministic bound of 6.4)."""
+    from proofs_check.sde_moments import check_ou
+
+    ok = check_ou(_ctx("sde.ou_closed_form"))
+    assert ok.verdict is Verdict.PASS and ok.residual > -1e-9  # attained
+    for kw in ({"factor": 0.99}, {"ignore_diffusion": True}):
+        res = check_ou(_ctx("sde.ou_closed_form"), **kw)
+        assert res.verdict is Verdict.FAIL and res.residual > 0, kw
+
+
+def test_sde_moment_bound_holds_on_a_simulated_nonlinear_sde():
+    """Seeded Euler-Maruyama paths of a nonlinear contracting SDE stay below the bound; the bound
+    of the ODE (diffusion ignored) is violated."""
+    from proofs_check.sde_moments import check_simulated
+
+    assert check_simulated(_ctx("sde.simulated_nonlinear")).verdict is Verdict.PASS
+    res = check_simulated(_ctx("sde.simulated_nonlinear"), ignore_diffusion=True)
+    assert res.verdict is Verdict.FAIL and res.residual > 0

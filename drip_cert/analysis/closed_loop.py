@@ -17,6 +17,14 @@ from ``x_0`` stays within ``e^{-lambda t}||x_0||`` of the trajectory from ``0``,
 ``d/dt ||y|| <= -lambda ||y|| + ||F(t, 0)||``, so ``||X*_t|| <= max_{x0 in box} ||x_0|| +
 sup_t ||F(t, 0)|| / lambda`` almost surely, hence in every ``L_{2p}`` (valid when the rate holds
 on all of ``R^n``; on a box it is labelled an estimate). Anything else is a sampled estimate.
+
+With a known diffusion ``p != 0`` the nominal process (4b) is the SDE ``dX* = F dt + p dW*`` and
+the deterministic bound is false; ``Delta_star`` is then the moment bound of
+docs/math/contraction.md Proposition 6.5 (:func:`sde_moment_bound`): Ito on ``||X||^{2p*}``,
+Jensen, and a comparison argument give ``sup_t ||X*_t||_{L_{2p*}} <= max(max_box ||x0||, u*)``
+with ``u*`` the positive root of ``kappa u^2 = B u + A`` (6.5b), from the rate, ``||F(0)||`` and a
+growth bound of the known diffusion ``||p||_F^2 <= a0 + a1 ||x|| + a2 ||x||^2``
+(:func:`diffusion_growth`, from ``Delta_p``); ``inf`` when ``kappa <= 0``.
 """
 
 from __future__ import annotations
@@ -28,6 +36,7 @@ import numpy as np
 import sympy as sp
 
 from drip_cert.analysis.constants import batch_fn
+from drip_cert.analysis.growth import growth_bound, sup_bound
 from drip_cert.analysis.mlp_bounds import enclose_output, lipschitz_bound
 from drip_cert.model.blocks import block_applications
 from drip_cert.model.mlp import MLP
@@ -43,6 +52,7 @@ from drip_cert.numerics.rounding import (
     spectral_norm_upper,
     sq_up,
     sqrt_up,
+    sub_down,
     sub_down_np,
     sum_up_np,
     up_np,
@@ -168,6 +178,132 @@ def _f_at_zero_up(dec: AffineBlocks, s: System) -> float:
 
 
 @dataclass(frozen=True)
+class DiffusionGrowth:
+    """A growth bound of the known diffusion on ``[0, T] x R^n`` (docs/math/contraction.md (6.5a)):
+
+    ``||p(t, x)||_F^2 <= a0 + a1 ||x|| + a2 ||x||^2``, every coefficient ``>= 0``.
+
+    ``quantity`` is the bound it rests on (``Delta_p``), for the provenance of what uses it.
+    """
+
+    a0: float
+    a1: float
+    a2: float
+    quantity: Quantity
+    note: str
+
+
+def diffusion_growth(s: System, Delta_p: Quantity | None = None) -> tuple[DiffusionGrowth, ...]:
+    """Growth bounds (6.5a) of ``s.diffusion``; empty when the known diffusion is zero.
+
+    Parameters
+    ----------
+    s
+        The system.
+    Delta_p
+        ``Delta_p`` with ``||p(t, x)||_F^2 <= Delta_p^2 (1 + ||x||^2)^{1/2}`` (L1-DRAC Assumption 1
+        as :func:`~drip_cert.analysis.constants.uncertainty_constants` computes it, or the
+        user's ``[constants]`` value); computed here by
+        :func:`~drip_cert.analysis.growth.growth_bound` when ``None``.
+
+    Returns
+    -------
+    tuple of DiffusionGrowth
+        Every bound proved (each is valid; the caller keeps the one giving the smallest result):
+        ``(1 + r^2)^{1/2} <= 1 + r`` gives ``a0 = a1 = Delta_p^2``, ``a2 = 0``; when ``p`` does not
+        depend on the state, ``Delta_p`` bounds ``sup_t ||p(t)||_F`` itself (the supremum of
+        the ratio is attained at ``x = 0``), so ``a0 = Delta_p^2``, ``a1 = a2 = 0`` (exact for a
+        constant ``p``); when the entries of ``p`` have finite whole-space enclosures
+        (:func:`~drip_cert.analysis.growth.sup_bound`), ``a0 = sup ||p||_F^2``, ``a1 = a2 = 0``.
+        Squares are rounded up.
+    """
+    p = s.diffusion
+    if p is None or all(e == 0 for e in p):
+        return ()
+    depends_t = any(s.t in e.free_symbols for e in p)
+    t_sym = s.t if depends_t else None
+    t_rng = (0.0, float(s.horizon)) if depends_t else (0.0, 0.0)
+    if Delta_p is None:
+        Delta_p = growth_bound(
+            sp.Matrix(p),
+            s.states,
+            t_sym,
+            t_rng,
+            sp.Rational(1, 2),
+            "Delta_p",
+            source="L1-DRAC Assumption 1",
+            evaluate=batch_fn(s, sp.Matrix(p)) if s.blocks else None,
+        )
+    D2 = sq_up(Delta_p.value) if math.isfinite(Delta_p.value) else math.inf
+    apps = set()
+    for e in p:
+        apps |= block_applications(e)
+    if not apps and not any(x in e.free_symbols for e in p for x in s.states):
+        note = f"p independent of x: ||p||_F^2 <= Delta_p^2 = {D2:.6g}"
+        return (DiffusionGrowth(D2, 0.0, 0.0, Delta_p, note),)
+    out = [
+        DiffusionGrowth(
+            D2,
+            D2,
+            0.0,
+            Delta_p,
+            "||p||_F^2 <= Delta_p^2 (1 + ||x||^2)^(1/2) <= Delta_p^2 (1 + ||x||), "
+            f"Delta_p^2 = {D2:.6g}",
+        )
+    ]
+    if not apps:
+        sup = sup_bound(sp.Matrix(p), s.states, t_sym, t_rng, "sup ||p||_F", source="")
+        if math.isfinite(sup.value):
+            S2 = sq_up(sup.value)
+            note = f"||p||_F^2 <= sup ||p||_F^2 = {S2:.6g} (whole-space enclosures)"
+            out.append(DiffusionGrowth(S2, 0.0, 0.0, sup, note))
+    return tuple(out)
+
+
+def sde_moment_bound(
+    r0: float, b: float, lam: float, q: int, a0: float, a1: float = 0.0, a2: float = 0.0
+) -> float:
+    """``sup_t ||X_t||_{L_{2q}}`` for ``dX = F(t, X) dt + p(t, X) dW`` (docs/math/contraction.md
+    Proposition 6.5), rounded up; ``inf`` when (6.5c) ``kappa > 0`` fails.
+
+    Hypotheses: ``(x - y)^T (F(t, x) - F(t, y)) <= -lam ||x - y||^2`` for all ``x, y`` (a global
+    log-norm rate), ``||F(t, 0)|| <= b``, ``||p(t, x)||_F^2 <= a0 + a1 ||x|| + a2 ||x||^2`` and
+    ``||X_0|| <= r0`` almost surely. With ``k = (2q - 1) / 2``,
+
+    ``kappa = lam - k a2``, ``B = b + k a1``, ``A = k a0`` and
+    ``u* = B / (2 kappa) + sqrt((B / (2 kappa))^2 + A / kappa)`` (the positive root of
+    ``kappa u^2 = B u + A``), the bound is ``max(r0, u*)`` (6.5b). ``u*`` grows with ``A, B`` and
+    falls with ``kappa``: ``kappa`` is rounded down, everything else up.
+
+    Parameters
+    ----------
+    r0
+        ``||X_0|| <= r0`` (the farthest corner of the initial support).
+    b
+        ``sup_t ||F(t, 0)||``.
+    lam
+        The rate (``> 0``).
+    q
+        The moment order (``p*`` of L1-DRAC Assumption 3: the ``L_{2q}`` norm), an integer ``>= 1``.
+    a0, a1, a2
+        The growth bound of the diffusion (:class:`DiffusionGrowth`).
+    """
+    if q < 1 or int(q) != q:
+        raise ValueError(f"the moment order q must be an integer >= 1, got {q!r}")
+    if min(r0, b, a0, a1, a2) < 0 or not lam > 0:
+        raise ValueError("r0, b, a0, a1, a2 must be >= 0 and lam > 0")
+    k = (2 * int(q) - 1) / 2  # exact: a half-integer below 2^52
+    kappa = sub_down(lam, mul_up(k, a2)) if a2 > 0 else lam
+    if not kappa > 0 or not math.isfinite(kappa):
+        return math.inf
+    A = mul_up(k, a0)
+    B = add_up(b, mul_up(k, a1))
+    h = div_up(B, 2.0 * kappa)  # 2 kappa is exact
+    u = add_up(h, sqrt_up(add_up(sq_up(h), div_up(A, kappa))))
+    return max(r0, u)
+
+
+@dataclass(frozen=True)
 class ClosedLoopConstants:
     """``Delta_f``, ``L_f`` (and whether Assumption 8 is used) and ``Delta_star``."""
 
@@ -179,8 +315,59 @@ class ClosedLoopConstants:
         return (self.Delta_f, self.L_f, self.Delta_star)
 
 
+def _sde_delta_star(
+    r0: float,
+    F0: float,
+    lam: Quantity,
+    p_star: int,
+    growths: tuple[DiffusionGrowth, ...],
+    method: How,
+    source: str,
+    what_f0: str,
+    suffix: str = "",
+) -> Quantity:
+    """``Delta_star`` of Proposition 6.5 for a nominal process with a known diffusion: the
+    smallest bound over the diffusion's growth bounds ``growths`` (each one valid)."""
+    k = (2 * p_star - 1) / 2
+    vals = [sde_moment_bound(r0, F0, lam.value, p_star, g.a0, g.a1, g.a2) for g in growths]
+    i = int(np.argmin(vals))
+    value, growth = vals[i], growths[i]
+    if math.isfinite(value):
+        why = (
+            f"sup_t ||X*_t||_L{2 * p_star} <= max(max_box ||x0||, u*) = max({r0:.6g}, u*) "
+            f"(contraction.md Prop. 6.5: nominal SDE with the known diffusion, {what_f0} "
+            f"= {F0:.6g}, lambda = {lam.value:.6g}, p* = {p_star}; {growth.note})"
+        )
+    elif not math.isfinite(growth.a0) or not math.isfinite(growth.a1):
+        why = (
+            "no finite growth bound of the known diffusion (Delta_p = "
+            f"{growth.quantity.value:.6g}): contraction.md Prop. 6.5 gives nothing; give "
+            "Delta_star in [constants] if you know one"
+        )
+    else:
+        why = (
+            f"contraction.md (6.5c) fails: kappa = lambda - {k:g} a2 = {lam.value:.6g} - "
+            f"{k:g} * {growth.a2:.6g} <= 0 (the diffusion grows too fast for the "
+            f"{2 * p_star}-th moment to stay bounded by this argument)"
+        )
+    return Quantity.derive(
+        "Delta_star",
+        value,
+        inputs=[lam, growth.quantity],
+        method=method,
+        source=source,
+        note=why + suffix,
+    )
+
+
 def closed_loop_constants(
-    s: System, which: str, lam: Quantity, global_rate: bool
+    s: System,
+    which: str,
+    lam: Quantity,
+    global_rate: bool,
+    *,
+    p_star: int = 1,
+    Delta_p: Quantity | None = None,
 ) -> ClosedLoopConstants:
     """Bound ``Delta_f``, ``L_f``, ``Delta_star`` of the closed loop under ``which`` policy.
 
@@ -194,6 +381,12 @@ def closed_loop_constants(
         The contraction rate of that closed loop (``> 0``).
     global_rate
         Whether ``lam`` holds on all of ``R^n`` (needed for a sound ``Delta_star``).
+    p_star
+        The moment order of L1-DRAC Assumption 3 (``Delta_star`` bounds the ``L_{2 p_star}``
+        norm); matters only with a known diffusion.
+    Delta_p
+        The growth constant of the known diffusion (:func:`diffusion_growth`); computed when
+        ``None`` and the diffusion is not zero.
     """
     F = s.closed_loop(which)
     box = np.array(s.support, dtype=float)
@@ -202,6 +395,7 @@ def closed_loop_constants(
     src_f = "L1-DRAC Assumption 1 (nominal drift = closed loop under the policy)"
     src_l = "L1-DRAC Assumption 8"
     src_s = "L1-DRAC Assumption 3"
+    growths = diffusion_growth(s, Delta_p)
     if dec is not None and all(s.blocks[b].mlp is not None for b in dec.C):
         # every norm is a rigorous upper bound and every operation is rounded up (all terms >= 0)
         nA = _norm_of_converted(dec.A, spectral=True)
@@ -233,13 +427,27 @@ def closed_loop_constants(
             note="||A|| + sum ||C|| Lip(h) (spectral-norm product bound of each MLP)",
         )
         F0 = _f_at_zero_up(dec, s)
-        bound = add_up(r0, div_up(F0, lam.value))
         global_ok = global_rate and lam.how.proved
+        method = How.SOUND if global_ok else How.ESTIMATE
+        if growths:
+            dS = _sde_delta_star(
+                r0,
+                F0,
+                lam,
+                p_star,
+                growths,
+                method,
+                src_s,
+                "||F(0)||",
+                "" if global_ok else " (rate not global: estimate)",
+            )
+            return ClosedLoopConstants(dF, lF, dS)
+        bound = add_up(r0, div_up(F0, lam.value))
         dS = Quantity.derive(
             "Delta_star",
             bound,
             inputs=[lam],
-            method=How.SOUND if global_ok else How.ESTIMATE,
+            method=method,
             source=src_s,
             note=f"max_box ||x0|| + ||F(0)||/lambda = {r0:.6g} + {F0:.6g}/{lam.value:.6g}"
             + ("" if global_ok else " (rate not global: estimate)"),
@@ -261,6 +469,22 @@ def closed_loop_constants(
             "super-linear growth, L1-DRAC Assumption 1 fails"
         )
     F0 = max(float(np.linalg.norm(fn(float(t), np.zeros((1, s.n)))[0])) for t in times)
+    if growths:
+        return ClosedLoopConstants(
+            Quantity("Delta_f", D, How.ESTIMATE, src_f, est_D),
+            Quantity("L_f", L, How.ESTIMATE, src_l, est_L),
+            _sde_delta_star(
+                r0,
+                F0,
+                lam,
+                p_star,
+                growths,
+                How.ESTIMATE,
+                src_s,
+                "||F(t,0)|| sampled at 5 times",
+                " (F(t,0) sampled: estimate)",
+            ),
+        )
     return ClosedLoopConstants(
         Quantity("Delta_f", D, How.ESTIMATE, src_f, est_D),
         Quantity("L_f", L, How.ESTIMATE, src_l, est_L),

@@ -17,6 +17,7 @@ from drip_cert.control.l1drac import L1Params
 from drip_cert.errors import SpecError
 
 __all__ = [
+    "DEFAULT_SCENARIOS",
     "GAPS",
     "POLICY_DTYPES",
     "SCENARIOS",
@@ -26,7 +27,19 @@ __all__ = [
     "SimConfig",
 ]
 
-SCENARIOS = ("expert_nominal", "learned_nominal", "learned_true", "learned_l1_true")
+SCENARIOS = (
+    "expert_nominal",
+    "learned_nominal",
+    "learned_true",
+    "learned_l1_true",
+    "nominal_sde",
+)
+"""Every process the engine can simulate. ``nominal_sde`` is L1-DRAC's nominal process (4b) when
+the known diffusion ``p`` is not zero: ``dX* = (f + g pi_IL)(t, X*) dt + p(t, X*) dW`` from
+``xi ~ D``, driven by the Brownian path of the true processes (a synchronous coupling)."""
+
+DEFAULT_SCENARIOS = SCENARIOS[:4]
+"""The four processes of the DRIP paper (the default of :attr:`SimConfig.scenarios`)."""
 
 STATUS_OK = 0
 """A path that stayed finite and below ``divergence_cap``."""
@@ -42,6 +55,9 @@ GAPS = (
     ("uncertainty_true", "learned_true", "learned_nominal"),
     ("total_l1", "learned_l1_true", "expert_nominal"),
     ("uncertainty_l1", "learned_l1_true", "learned_nominal"),
+    # with a known diffusion p != 0, L1-DRAC's radius is a distance to the SDE (4b), not to x'
+    ("uncertainty_true_sde", "learned_true", "nominal_sde"),
+    ("uncertainty_l1_sde", "learned_l1_true", "nominal_sde"),
 )
 
 POLICY_DTYPES = ("float64", "float32")
@@ -67,7 +83,7 @@ class SimConfig:
     chunk_size
         Paths simulated together (memory bound; does not change the result).
     scenarios
-        Subset of :data:`SCENARIOS` to simulate.
+        Subset of :data:`SCENARIOS` to simulate (default :data:`DEFAULT_SCENARIOS`).
     l1
         :class:`~drip_cert.control.l1drac.L1Params` (required for ``learned_l1_true``;
         its ``dt`` must equal ``dt``).
@@ -99,7 +115,7 @@ class SimConfig:
     n_paths: int
     seed: int = 0
     chunk_size: int = 4096
-    scenarios: tuple[str, ...] = SCENARIOS
+    scenarios: tuple[str, ...] = DEFAULT_SCENARIOS
     l1: L1Params | None = None
     record_every: int = 10
     n_sample_paths: int = 8

@@ -6,6 +6,8 @@ Scenarios (DRIP Definition "Systems", eqs. NominalProcesses and L1DRACProcess):
 ``learned_nominal``  ``dx'  = (f(t,x') + g(t) pi_IL(x')) dt``,         ``x'_0 = xi``
 ``learned_true``     ``dX   = (f + g pi_IL + Lambda_mu)(t,X) dt + (p + Lambda_sigma)(t,X) dW``
 ``learned_l1_true``  as ``learned_true`` with ``pi_ad = pi_IL + U_L1`` (L1-DRAC (15)).
+``nominal_sde``      ``dX* = (f + g pi_IL)(t,X*) dt + p(t,X*) dW``,   ``X*_0 = xi`` (only on
+                     request: L1-DRAC's nominal process (4b) when the known diffusion ``p != 0``)
 
 Discretisation: Euler-Maruyama with step ``dt`` for the SDEs and explicit Euler with the SAME
 ``dt`` for the nominal ODEs. Using one scheme for all four makes the gaps measure the difference
@@ -17,7 +19,10 @@ DRIP paper's ``D = D_bar``). With ``x0_bar_sampler`` the true processes start fr
 ``xi_bar ~ D_bar`` drawn INDEPENDENTLY of ``xi`` (the product coupling, one admissible coupling
 in Definition "ImitationGap"). ``learned_true`` and ``learned_l1_true`` are driven by the SAME
 Brownian path (common random numbers); each process has the law the paper defines, and the
-comparison with/without L1 has less Monte-Carlo noise.
+comparison with/without L1 has less Monte-Carlo noise. ``nominal_sde`` is driven by that same
+path too (a synchronous coupling of (4a) and (4b): one admissible coupling, so its moments of
+``||X_t - X*_t||`` bound the Wasserstein distance of the laws from above); the other scenarios'
+numbers do not depend on whether it is simulated.
 
 Randomness. Path ``i`` draws its initial states from ``fold_in(k_x0, i)`` (and
 ``fold_in(k_x0bar, i)``), with ``k_* = fold_in(PRNGKey(seed), const)``. Component ``c`` of its

@@ -44,6 +44,7 @@ that system, so the calls cost under 0.5 % of a run while a long chunk still rep
 progress many times."""
 
 _TRUE_SCENARIOS = ("learned_true", "learned_l1_true")
+_NOISY_SCENARIOS = (*_TRUE_SCENARIOS, "nominal_sde")  #: driven by the Brownian path
 
 # Theta_ad and the step counter of L1-DRAC depend on time only: one copy for the whole batch
 _SHARED: L1State[int | None] = L1State(x_hat=0, eta=0, lam_hat=0, theta=None, step=None)
@@ -346,13 +347,14 @@ def _advance_impl(key, carry, r0, *, model, config, records_per_call):
     inv_cap = 1.0 / config.divergence_cap
     stride = config.record_every
     l1p = config.l1
-    has_true = any(s in _TRUE_SCENARIOS for s in scen)
+    has_noise = any(s in _NOISY_SCENARIOS for s in scen)
     d = model.d
     k_bm = jax.random.fold_in(key, 2)
 
     f_b = jax.vmap(model.f, in_axes=(None, 0))
     lam_mu_b = jax.vmap(model.lam_mu, in_axes=(None, 0))
     diff_b = jax.vmap(lambda t, x: model.p(t, x) + model.lam_sigma(t, x), in_axes=(None, 0))
+    known_diff_b = jax.vmap(model.p, in_axes=(None, 0))
     expert_b = jax.vmap(model.expert)
     learned = model.learned
     if learned is not None and config.policy_dtype != "float64":
@@ -379,7 +381,7 @@ def _advance_impl(key, carry, r0, *, model, config, records_per_call):
         g_t = model.g(t)
         new_xs, new_codes = [], []
         dw = None
-        if has_true:
+        if has_noise:
             dw = sqrt_dt * normals(k_bm, idx, j, d)
         for i, s in enumerate(scen):
             x = xs[i]
@@ -387,6 +389,9 @@ def _advance_impl(key, carry, r0, *, model, config, records_per_call):
                 x_new = x + dt * known_drift(t, x, g_t, expert_b)
             elif s == "learned_nominal":
                 x_new = x + dt * known_drift(t, x, g_t, learned_b)
+            elif s == "nominal_sde":  # L1-DRAC (4b): the known diffusion only, same dW
+                noise = jnp.einsum("bnd,bd->bn", known_diff_b(t, x), dw)
+                x_new = x + dt * known_drift(t, x, g_t, learned_b) + noise
             elif s == "learned_true":
                 drift = known_drift(t, x, g_t, learned_b) + lam_mu_b(t, x)
                 noise = jnp.einsum("bnd,bd->bn", diff_b(t, x), dw)

@@ -569,6 +569,14 @@ def _index(values: tuple[float, ...], x: float | None) -> int | None:
     return None
 
 
+def uncertainty_gap_name(res: Any, with_l1: bool = True) -> str:
+    """The gap L1-DRAC's radius bounds: to the nominal SDE (4b) when the run simulated it (a
+    known diffusion ``p != 0``), else to the ODE ``x'`` (DRIP's nominal process, ``p = 0``)."""
+    base = "uncertainty_l1" if with_l1 else "uncertainty_true"
+    names = [g[0] for g in getattr(getattr(res, "config", None), "gaps", ())]
+    return base + "_sde" if base + "_sde" in names else base
+
+
 def checks_from_result(
     res: Any,
     *,
@@ -644,7 +652,9 @@ def checks_from_result(
                 time=pol.argmax_time,
             )
         )
-    unc = res.gap("uncertainty_l1" if with_l1 else "uncertainty_true")
+    unc_name = uncertainty_gap_name(res, with_l1)
+    unc = res.gap(unc_name)
+    xn = "X*_t" if unc_name.endswith("_sde") else "x'_t"  # the nominal SDE (4b) or the ODE
     tot = res.gap("total_l1" if with_l1 else "total_true")
     l1_checks: list[EmpiricalCheck] = []
     common: dict[str, Any] = {"n_total": n_total, "times": unc.times}
@@ -656,14 +666,15 @@ def checks_from_result(
             unc.n,
             rho_l1,
             level,
-            what="max_t E||X_t - x'_t|| vs rho_L1(p) (E|.| <= L_2p norm)",
+            what=f"max_t E||X_t - {xn}|| vs rho_L1(p) (E|.| <= L_2p norm)",
             **common,
         )
     )
     q, q2 = 2 * int(p), 4 * int(p)
     z1 = unc.power_sums[unc.powers.index(q)] if q in unc.powers else None
     z2 = unc.power_sums[unc.powers.index(q2)] if q2 in unc.powers else None
-    lp_name, lp_what = f"uncertainty_L{q}_norm", f"max_t (E||X_t - x'_t||^{q})^(1/{q}) vs rho_L1(p)"
+    lp_name = f"uncertainty_L{q}_norm"
+    lp_what = f"max_t (E||X_t - {xn}||^{q})^(1/{q}) vs rho_L1(p)"
     if z1 is None:
         l1_checks.append(
             _make(
@@ -694,7 +705,7 @@ def checks_from_result(
             )
         )
     j = _index(unc.kappas, kappa)
-    tail_what = "max_t P(||X_t - x'_t|| >= kappa) vs delta_L1 (L1-DRAC (130a))"
+    tail_what = f"max_t P(||X_t - {xn}|| >= kappa) vs delta_L1 (L1-DRAC (130a))"
     if j is None:
         l1_checks.append(
             _make(

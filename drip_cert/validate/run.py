@@ -31,6 +31,7 @@ from drip_cert.validate.checks import (
     EmpiricalCheck,
     checks_from_result,
     overall_status,
+    uncertainty_gap_name,
 )
 from drip_cert.validate.scenarios import (
     MAX_STEPS,
@@ -38,6 +39,7 @@ from drip_cert.validate.scenarios import (
     SHORT_PATHS,
     SHORT_STEPS,
     dtype_effect,
+    has_known_diffusion,
     run_scenarios,
 )
 
@@ -255,6 +257,12 @@ def validate(
         backend=backend,
         policy_dtype=policy_dtype,
     )
+    if has_known_diffusion(s):
+        notes.append(
+            "known diffusion p != 0: the uncertainty gaps are measured against L1-DRAC's "
+            "nominal process (4b), the learned closed loop with the known diffusion "
+            "(scenario nominal_sde, driven by the true processes' Brownian path), not the ODE x'"
+        )
     effect = None
     if policy_dtype != "float64":
         # on this machine: ~2 x 1000 paths, less than a cluster's start-up and compile
@@ -325,7 +333,7 @@ def validate(
     for key, gap in (
         ("tig_max", "total_l1"),
         ("policy_ig_max", "policy"),
-        ("uncertainty_ig_max", "uncertainty_l1"),
+        ("uncertainty_ig_max", uncertainty_gap_name(res)),
         ("tig_max_without_l1", "total_true"),
     ):
         g = res.gap(gap)

@@ -98,7 +98,9 @@ def l1_section(
             f"{lam.value:.6g}): L1-DRAC Assumption 2 fails, no design",
         )
     q["lambda"] = lam.renamed("lambda", source="L1-DRAC Assumption 2 (" + which + " closed loop)")
-    cl = closed_loop_constants(s, which, lam, global_rate)
+    cl = closed_loop_constants(
+        s, which, lam, global_rate, p_star=st.p_star or st.p, Delta_p=unc_q.get("Delta_p")
+    )
     for qq in cl.quantities():
         q[qq.name] = qq
     for name in ("Delta_g", "Delta_g_dot", "Delta_g_perp", "Delta_Theta"):
