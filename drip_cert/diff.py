@@ -65,8 +65,8 @@ For validation reports also: ``status`` (``holds`` to anything else, or ``nothin
 regression: the run no longer validates the certificate).
 
 Timings are never compared: the top-level key ``timings`` of either layout and every key that
-:func:`is_timing_key` names (``time_s``, ``seconds``, ``wall_s``, ...; not ``lambda_s``, the
-filter bandwidth) are removed from both outputs before any rule runs.
+:func:`is_timing_key` names (``time_s``, ``seconds``, ``compile_s``, ``run_s``, ...; not
+``lambda_s``, the filter bandwidth) are removed from both outputs before any rule runs.
 
 Tolerance: two numbers ``a`` (old) and ``b`` (new) differ when ``|b - a| > rtol * max(|a|, |b|) +
 ATOL``; :data:`DEFAULT_RTOL` is ``1e-3``.
@@ -165,14 +165,17 @@ def constant_direction(name: str) -> tuple[str, str]:
     return UNKNOWN_DIRECTION, "constant"
 
 
-_TIMING_NAMES = frozenset({"timings", "seconds", "time_s", "wall_s", "elapsed_s", "cpu_s"})
+_TIMING_NAMES = frozenset(
+    {"timings", "seconds", "time_s", "wall_s", "elapsed_s", "cpu_s", "compile_s", "run_s"}
+)
 
 
 def is_timing_key(key: str) -> bool:
     """Whether a JSON key holds a wall-clock timing, which ``diff`` never compares: ``timings``
     (the key the timings of a run are kept under), ``seconds``, ``time_s``, ``wall_s``,
-    ``elapsed_s``, ``cpu_s``, and keys ending in ``_time_s``, ``_wall_s`` or ``_seconds``. Not
-    every key ending in ``_s`` is a time: ``lambda_s`` is the L1-DRAC filter bandwidth."""
+    ``elapsed_s``, ``cpu_s``, ``compile_s``, ``run_s`` (the simulation's), and keys ending in
+    ``_time_s``, ``_wall_s`` or ``_seconds``. Not every key ending in ``_s`` is a time:
+    ``lambda_s`` is the L1-DRAC filter bandwidth, so the list is explicit."""
     return key in _TIMING_NAMES or key.endswith(("_time_s", "_wall_s", "_seconds"))
 
 
