@@ -271,9 +271,12 @@ def build_parser() -> argparse.ArgumentParser:
     q = sub.add_parser(
         "diff",
         help="compare two certificates (or validation reports); exit 1 on a regression",
-        description="Verdict changes, bounds loosened or tightened beyond --rtol, margins that "
-        "changed sign, constants whose provenance weakened (exact > sound > given > estimate); "
-        "for validation reports also check statuses. Exit 1 on a regression, 0 otherwise.",
+        description="Compares claims, not headline numbers: verdicts and their reasons, each "
+        "bound as a claim (radius, delta, p, form, coordinates), constants (removed, or moved "
+        "beyond --rtol in the loosening direction), soundness, scope_justified, margins that "
+        "changed sign, provenance (exact > sound > given > estimate); for validation reports "
+        "also statuses. Timings are ignored. Rules: docs/diff.md. Exit 1 on a regression, 0 "
+        "otherwise.",
     )
     q.add_argument("old", help="the baseline: certify --json or validation.json output")
     q.add_argument("new", help="the output to compare with it (same kind)")

@@ -163,6 +163,250 @@ def test_validation_rules(validation):
     assert _only(_diff(validation, new), "verdict", REGRESSION).key == "certificate.verdict"
 
 
+# ------------------------------------------------------- claims, not headline numbers (issue 22)
+# The names added with these rules (constant_direction, is_timing_key) are imported inside the
+# tests that use them, so that every test below also runs, and fails, against the diff of 8844af7.
+
+WEAKER_DELTA = 0.9
+"""The TaSIL delta of finding 3 of issue 22 (the plant certifies at 0.1): confidence 10 %."""
+
+LOOSENED = 100.0
+"""A constant's value times 100 with the same label (finding 3 of issue 22)."""
+
+
+def _kinds(res):
+    """``[(rule, effect), ...]`` of the changes, in order."""
+    return [(c.rule, c.effect) for c in res.changes]
+
+
+def test_larger_tasil_delta_at_the_same_radius_is_a_regression(cert):
+    new = copy.deepcopy(cert)
+    new["tasil"]["delta"] = WEAKER_DELTA
+    c = _only(_diff(cert, new), "claim", REGRESSION)
+    assert c.key == "tasil.delta" and (c.old, c.new) == (cert["tasil"]["delta"], WEAKER_DELTA)
+    assert "TaSIL claim weakened: delta 0.1 -> 0.9" in c.text and "the same radius" in c.text
+    new["rho"]["rho_tasil"] *= 1.5  # a looser radius too: still one claim line, no bound line
+    c = _only(_diff(cert, new), "claim", REGRESSION)
+    assert "a looser radius rho_TaSIL" in c.text
+    c = _only(_diff(new, cert), "claim", IMPROVEMENT)  # the other way round: stronger claim
+    assert "strengthened" in c.text
+
+
+def test_larger_tasil_delta_at_a_tighter_radius_is_a_trade_off_not_an_improvement(cert):
+    new = copy.deepcopy(cert)
+    new["tasil"]["delta"] = 2 * cert["tasil"]["delta"]
+    new["rho"]["rho_tasil"] /= 2
+    res = _diff(cert, new)
+    assert _kinds(res) == [("claim", "change")] and res.exit_status == 0
+    assert "neither claim implies the other" in res.changes[0].text
+
+
+def test_smaller_moment_order_p_is_a_regression_not_an_improvement(cert):
+    old = copy.deepcopy(cert)
+    old["l1drac"]["p"] = 2
+    new = copy.deepcopy(old)
+    new["l1drac"]["p"] = 1
+    c = _only(_diff(old, new), "claim", REGRESSION)
+    assert c.key == "l1drac.p" and "p 2 -> 1 (an L_4 -> L_2 moment bound)" in c.text
+    _only(_diff(new, old), "claim", IMPROVEMENT)
+    # what 8844af7 read as an improvement: a smaller p with it a smaller rho_L1 (and rho) is
+    # another claim, neither stronger nor weaker
+    new["rho"]["rho_l1"] /= 2
+    new["rho"]["rho_total"] = new["rho"]["rho_l1"] + new["rho"]["rho_tasil"]
+    res = _diff(old, new)
+    assert res.improvements == () and _kinds(res) == [("claim", "change")]
+
+
+def test_larger_l1drac_delta_at_the_same_kappa_is_a_regression(cert):
+    new = copy.deepcopy(cert)
+    new["l1drac"]["delta"] = 2 * cert["l1drac"]["delta"]
+    c = _only(_diff(cert, new), "claim", REGRESSION)
+    assert c.key == "l1drac.delta" and "L1-DRAC tail claim weakened" in c.text
+
+
+@pytest.mark.parametrize(
+    "key, value, radius",
+    [
+        ("tasil.rho_form", "held_out", "rho.rho_tasil"),
+        ("coordinates.system", "z = Theta x", "l1drac.kappa"),  # rho.* stay in x: compared
+    ],
+)
+def test_changed_form_or_coordinates_is_a_regression(cert, key, value, radius):
+    new = copy.deepcopy(cert)
+    table, last = key.split(".")
+    new[table][last] = value
+    rt, rl = radius.split(".")
+    new[rt][rl] /= 2  # the radius of another claim is not called tightened
+    c = _only(_diff(cert, new), "claim", REGRESSION)
+    assert c.key == key and f"({key}) {cert[table][last]} -> {value};" in c.text
+    assert "another statement, not compared" in c.text
+
+
+def test_removed_constant_is_a_regression(cert):
+    new = copy.deepcopy(cert)
+    gone = new["constants"].pop("L_mu")
+    c = _only(_diff(cert, new), "constant", REGRESSION)
+    assert c.key == "constants.L_mu" and c.old == gone["value"] and "removed" in c.text
+    c = _only(_diff(new, cert), "constant", "change")  # a new constant is a change
+    assert "new constant(s): L_mu" in c.text
+
+
+def test_constant_value_times_100_with_the_same_label_is_a_regression(cert):
+    new = copy.deepcopy(cert)
+    q = new["constants"]["L_mu"]
+    assert q["how"] == "sound" and q["value"] > 0
+    q["value"] *= LOOSENED
+    c = _only(_diff(cert, new), "constant", REGRESSION)
+    assert c.key == "constants.L_mu.value" and "loosened" in c.text and "(+99 relative)" in c.text
+    assert "tightened" in _only(_diff(new, cert), "constant", IMPROVEMENT).text
+    rate = copy.deepcopy(cert)  # a rate: smaller is looser
+    rate["constants"]["lambda_learned"]["value"] /= LOOSENED
+    c = _only(_diff(cert, rate), "constant", REGRESSION)
+    assert "smaller is looser" in c.text
+    within = copy.deepcopy(cert)
+    within["constants"]["L_mu"]["value"] *= 1 + DEFAULT_RTOL / 10
+    assert _diff(cert, within).changes == ()
+
+
+def test_constant_of_unknown_direction_is_flagged_on_any_move(cert):
+    from drip_cert.diff import constant_direction
+
+    name = "zeta_new"
+    assert constant_direction(name)[0] == "direction unknown"
+    old = copy.deepcopy(cert)
+    old["constants"][name] = dict(cert["constants"]["L_mu"], name=name, value=1.0)
+    for factor in (2.0, 0.5):
+        new = copy.deepcopy(old)
+        new["constants"][name]["value"] = factor
+        c = _only(_diff(old, new), "constant", REGRESSION)
+        assert "direction unknown" in c.text
+
+
+def test_every_constant_of_the_certificate_has_a_direction(cert):
+    from drip_cert.diff import constant_direction
+
+    unknown = [n for n in cert["constants"] if constant_direction(n)[0] == "direction unknown"]
+    assert unknown == []
+    assert constant_direction("lambda")[0] == "smaller is looser"
+    assert constant_direction("Delta_mu")[0] == "larger is looser"
+
+
+def test_sound_lost_with_new_estimated_constants_is_a_regression(cert):
+    new = copy.deepcopy(cert)
+    name = "sup||D(pi_IL - pi*)||"
+    new["constants"][name] = dict(cert["constants"]["L_mu"], name=name, how="estimate")
+    new["sound"], new["estimated_constants"] = False, [name]
+    res = _diff(cert, new)
+    assert _kinds(res) == [
+        ("soundness", REGRESSION),
+        ("soundness", REGRESSION),
+        ("constant", "change"),
+    ]
+    assert res.changes[0].text.startswith("sound: true -> false")
+    assert res.changes[1].key == "estimated_constants" and f"new estimated constant: {name}" in (
+        res.changes[1].text
+    )
+    assert _kinds(_diff(new, cert))[:2] == [("soundness", IMPROVEMENT)] * 2
+
+
+def test_new_given_constant_is_a_regression(cert):
+    new = copy.deepcopy(cert)
+    new["constants"]["Delta_mu"]["how"] = "given"
+    new["given_constants"] = ["Delta_mu"]
+    res = _diff(cert, new)
+    assert _kinds(res) == [("soundness", REGRESSION), ("provenance", REGRESSION)]
+    assert "new given constant: Delta_mu" in res.changes[0].text
+
+
+@pytest.mark.parametrize("where", ["assumptions", "tasil.gap_checks", "tasil.forms.checks"])
+def test_scope_justified_lost_is_a_regression(cert, where):
+    new = copy.deepcopy(cert)
+    if where == "assumptions":
+        check, path = new["assumptions"][1], f"assumptions[{cert['assumptions'][1]['id']}]"
+    elif where == "tasil.gap_checks":
+        check = new["tasil"]["gap_checks"][0]
+        path = f"tasil.gap_checks[{check['id']}]"
+    else:
+        form = new["tasil"]["forms"][0]
+        check = form["checks"][0]
+        path = f"tasil.forms[{form['name']}].checks[{check['id']}]"
+    assert check["scope_justified"] and check["status"] == "holds"
+    check["scope_justified"], check["scope_reason"] = False, "proved on a box only"
+    c = _only(_diff(cert, new), "scope", REGRESSION)
+    assert c.key == path + ".scope_justified"
+    assert "scope no longer justified (proved on a box only)" in c.text
+    _only(_diff(new, cert), "scope", IMPROVEMENT)
+
+
+def test_new_verdict_reason_is_a_regression(cert):
+    def conditional(*reasons):
+        out = copy.deepcopy(cert)
+        out["verdict"], out["certified"] = "conditional", False
+        out["verdict_reasons"] = list(reasons)
+        out["parts"]["contraction"].update(verdict="conditional", reasons=list(reasons))
+        return out
+
+    first = "DRIP-A2 rests on an unproved region: the box [[-0.5, 0.5]] is short by 0.7"
+    second = "DRIP-A1 rests on an estimate: Delta_g"
+    old = conditional(first)
+    c = _only(_diff(old, conditional(first, second)), "reason", REGRESSION)
+    assert c.new == second and "new verdict reason (verdict, part contraction)" in c.text
+    _only(_diff(conditional(first, second), old), "reason", IMPROVEMENT)
+    moved = conditional(first.replace("0.7", "0.8"))  # a moved number is not a new reason
+    assert _diff(old, moved).changes == ()
+
+
+TIMED = ("time_s", "seconds", "compile_s", "run_s")
+"""The wall-time keys of today's certificate and validation JSON (moved x100 + 1 s below)."""
+
+
+def test_timings_are_ignored(cert, validation):
+    from drip_cert.diff import is_timing_key
+
+    assert all(is_timing_key(k) for k in ("timings", *TIMED, "setup_time_s"))
+    assert not any(is_timing_key(k) for k in ("lambda_s", "Ts", "practical_Ts"))
+
+    def retimed(obj):
+        out = copy.deepcopy(obj)
+        found = []
+
+        def walk(node):
+            if isinstance(node, dict):
+                for k, v in node.items():
+                    if k in TIMED and isinstance(v, float):
+                        node[k] = 100 * v + 1
+                        found.append(k)
+                    else:
+                        walk(v)
+            elif isinstance(node, list):
+                for v in node:
+                    walk(v)
+
+        walk(out)
+        # whatever the key holds, even what other rules would read, is never compared
+        out["timings"] = {"certify_s": 1e6, "scope_justified": False, "sound": False}
+        return out, found
+
+    for obj, keys in ((cert, {"time_s", "seconds"}), (validation, set(TIMED))):
+        new, found = retimed(obj)
+        assert keys <= set(found)  # every timing key these outputs have was moved
+        old = copy.deepcopy(obj)
+        old["timings"] = {"certify_s": 1.0, "scope_justified": True, "sound": True}
+        assert _diff(old, new).changes == ()
+        assert _diff(obj, new).changes == ()
+
+
+def test_improvements_are_not_regressions(cert):
+    new = copy.deepcopy(cert)
+    new["tasil"]["delta"] = cert["tasil"]["delta"] / 2
+    new["constants"]["L_mu"]["value"] /= 2
+    new["constants"]["lambda"]["value"] *= 2
+    new["l1drac"]["p"] = cert["l1drac"]["p"] + 1
+    res = _diff(cert, new)
+    assert res.exit_status == 0 and res.regressions == ()
+    assert [c.rule for c in res.improvements] == ["claim", "claim", "constant", "constant"]
+
+
 # ------------------------------------------------------------------------------ the CLI
 def _write(tmp_path, name, obj):
     p = tmp_path / name

@@ -91,7 +91,11 @@ def test_baseline_fails_on_a_regression_and_passes_after_the_update_flag(warm, p
     pytester.runpytest(*plugin, "--drip-cert-update").assert_outcomes(passed=1)
     pytester.runpytest(*plugin).assert_outcomes(passed=1)
 
-    _set_gain(spec, "-0.90*x", PLANT_GAIN)  # back: an improvement passes, with a warning
+    # less noise: every bound and constant tightens, an improvement passes with a warning (the
+    # policy back to -0.98 x is not one: the nominal drift bound Delta_f grows, 1.9 -> 1.98)
+    text = spec.read_text()
+    assert 'diffusion = [["0.05"]]' in text
+    spec.write_text(text.replace('diffusion = [["0.05"]]', 'diffusion = [["0.02"]]'))
     res = pytester.runpytest(*plugin)
     res.assert_outcomes(passed=1, warnings=1)
     res.stdout.fnmatch_lines(["*BaselineChanged*tightened*"])
