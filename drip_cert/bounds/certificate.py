@@ -35,6 +35,7 @@ from drip_cert.analysis.learned_loop import best_global_rate, sup_policy_differe
 from drip_cert.analysis.mlp_loop import system_mlps
 from drip_cert.bounds.l1drac.system import l1_section
 from drip_cert.errors import AssumptionViolation, DripCertError
+from drip_cert.model.fingerprint import Fingerprint, fingerprint_of
 from drip_cert.model.system import System, box_image
 from drip_cert.numerics.rounding import div_up, mul_up, up
 from drip_cert.progress import Stages
@@ -182,6 +183,7 @@ class Certificate:
     extra_quantities: tuple[Quantity, ...] = ()  #: other inputs of the checks (h0, h1, gamma0)
     coordinates: CoordinateChange | None = None  #: None: computed in the user's x
     alternatives: tuple[Mapping[str, Any], ...] = ()  #: the other coordinates tried, in summary
+    fingerprint: Fingerprint | None = None  #: of the policy and design, in x (recorded data)
 
     @property
     def verdict(self) -> Verdict:
@@ -338,6 +340,7 @@ class Certificate:
             "rho": rho,
             "coordinates": self._coordinates_dict(),
             "notes": list(self.notes),
+            "fingerprint": None if self.fingerprint is None else self.fingerprint.to_dict(),
         }
 
     def _coordinates_dict(self) -> dict[str, Any]:
@@ -564,7 +567,8 @@ def _certify_in_metric(
         demos = demonstration_set(spec.system, spec.settings.tasil)
     zdemos = None if demos is None else _demonstrations_in_z(demos, change)
     cert = _certify_in(zspec, zdemos, stage)
-    return dataclasses.replace(cert, coordinates=change)
+    fp = fingerprint_of(spec.system, _deployed_design(cert.l1), change.theta)  # of x, not z
+    return dataclasses.replace(cert, coordinates=change, fingerprint=fp)
 
 
 def _demonstrations_in_z(demos: DemonstrationSet, change: CoordinateChange) -> DemonstrationSet:
@@ -830,7 +834,16 @@ def _certify_in(spec: Spec, demonstrations: DemonstrationSet | None, stage: Stag
         notes=tuple(notes),
         invariance=inv,
         extra_quantities=tuple(extra_q),
+        fingerprint=fingerprint_of(s, _deployed_design(l1)),
     )
+
+
+def _deployed_design(l1: Any) -> tuple[float, float, float] | None:
+    """``(omega, lambda_s, T_s)`` the deployed controller runs (``None``: no feasible design)."""
+    if l1 is None or not l1.feasible:
+        return None
+    d = l1.design
+    return (float(d.omega), float(d.lambda_s), float(d.Ts))
 
 
 def _learned_contraction(
