@@ -28,6 +28,7 @@ _EXPORTS: dict[str, str] = {
     "mlp_block": "drip_cert.model.blocks",
     "MLP": "drip_cert.model.mlp",
     "load_mlp": "drip_cert.model.mlp",
+    "Fingerprint": "drip_cert.model.fingerprint",
     # analysis
     "input_constants": "drip_cert.analysis.constants",
     "uncertainty_constants": "drip_cert.analysis.constants",

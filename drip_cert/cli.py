@@ -16,7 +16,7 @@ from typing import Any
 
 from drip_cert.bounds.l1drac.toml import design_l1_report
 from drip_cert.diff import DEFAULT_RTOL, diff_files, diff_text
-from drip_cert.errors import AssumptionViolation, DripCertError, SpecError
+from drip_cert.errors import AssumptionViolation, DripCertError, FingerprintError, SpecError
 from drip_cert.figures_l1 import l1_front_figure
 from drip_cert.numerics.atomic_io import jsonable
 from drip_cert.report import certificate_markdown, l1_design_text, train_text, validation_text
@@ -111,7 +111,19 @@ def cmd_train(args: argparse.Namespace) -> int:
 
 def cmd_validate(args: argparse.Namespace) -> int:
     if args.data is not None:
-        report = validate_recorded(args.spec, args.data, out=args.out, progress=not args.json)
+        report = validate_recorded(
+            args.spec,
+            args.data,
+            out=args.out,
+            progress=not args.json,
+            accept_unfingerprinted=args.accept_unfingerprinted,
+        )
+        if report.result.data.fingerprint is None:  # accepted by the flag: say so on stderr
+            print(
+                f"drip-cert: warning: {args.data}: the data carry no fingerprint; accepted "
+                "unverified by --accept-unfingerprinted",
+                file=sys.stderr,
+            )
     else:
         report = validate_spec(
             args.spec,
@@ -255,6 +267,12 @@ def build_parser() -> argparse.ArgumentParser:
         help="check recorded trajectories or gap series (.npz or .csv, docs/data_format.md) "
         "instead of simulating; --trajectories, --seed, --practical-ts, --quick do not apply",
     )
+    q.add_argument(
+        "--accept-unfingerprinted",
+        action="store_true",
+        help="with --data: accept data without a fingerprint (with a warning) instead of "
+        "refusing them (docs/data_format.md)",
+    )
     q.add_argument("--json", action="store_true")
     _add_simulation_options(q)
     q.set_defaults(func=cmd_validate)
@@ -352,6 +370,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 2
     except AssumptionViolation as exc:
         print(f"drip-cert: not certified: {exc}", file=sys.stderr)
+        return 1
+    except FingerprintError as exc:  # recorded data of another policy or design: not evidence
+        print(f"drip-cert: {exc}", file=sys.stderr)
         return 1
     except DripCertError as exc:
         print(f"drip-cert: error: {exc}", file=sys.stderr)

@@ -4,7 +4,9 @@
 certificate's L1-DRAC design (``omega``, ``lambda_s``, ``T_s``) around the certified learned
 policy; :func:`learned_policy` returns that policy as a plain callable ``x -> u``. A simulator or
 robot loop that calls them runs exactly what the certificate is about; record its trajectories
-(``docs/data_format.md``) and check them with ``drip-cert validate SPEC --data FILE``.
+(``docs/data_format.md``) with ``controller.fingerprint`` (or ``policy.fingerprint`` for data of
+the policy alone) and check them with ``drip-cert validate SPEC --data FILE``, which refuses data
+whose fingerprint is not the certificate's.
 
 Example::
 
@@ -26,6 +28,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from drip_cert.errors import SpecError
+from drip_cert.model.fingerprint import Fingerprint, policy_fingerprint
 from drip_cert.model.system import System
 from drip_cert.spec.load import Spec, load_spec
 
@@ -97,7 +100,8 @@ def l1drac_controller(
     L1DRACController
         With ``omega``, ``lambda_s``, ``T_s`` of the certificate's design, the certificate's
         system (in its coordinates ``z = Theta x`` when it has them; the controller maps the
-        measured ``x``) and its verdict in ``controller.verdict``.
+        measured ``x``), its verdict in ``controller.verdict`` and its fingerprint (policy and
+        design) in ``controller.fingerprint``: write it into the recorded data.
 
     Raises
     ------
@@ -127,7 +131,13 @@ def l1drac_controller(
             dt = d.Ts
     params = L1Params(d.omega, d.lambda_s, d.Ts, float(dt))
     theta = None if cert.coordinates is None else cert.coordinates.theta
-    return L1DRACController(cert.system.numeric, params, theta=theta, verdict=cert.verdict.value)
+    return L1DRACController(
+        cert.system.numeric,
+        params,
+        theta=theta,
+        verdict=cert.verdict.value,
+        fingerprint=cert.fingerprint,
+    )
 
 
 def learned_policy(source: str | Path | Spec | Any) -> PolicyFunction:
@@ -136,6 +146,8 @@ def learned_policy(source: str | Path | Spec | Any) -> PolicyFunction:
     ``source`` is a spec file, a :class:`~drip_cert.spec.load.Spec`, a
     :class:`~drip_cert.model.system.System` or a certificate (its user-coordinate policy is
     the spec's: the certificate's ``system`` may be in ``z``, so pass the spec for ``x``).
+    ``policy.fingerprint`` is the policy part of the certificate's fingerprint (``design``
+    ``None``): data recorded with the policy alone (no L1-DRAC) may carry it.
     """
     from drip_cert.control.controller import PolicyFunction  # jax: keep off the CLI start-up path
 
@@ -151,4 +163,5 @@ def learned_policy(source: str | Path | Spec | Any) -> PolicyFunction:
             "(for one in z = Theta x pass the spec)",
             field="source",
         )
-    return PolicyFunction(s.numeric, name=s.name)
+    fp = Fingerprint(policy=policy_fingerprint(s))
+    return PolicyFunction(s.numeric, name=s.name, fingerprint=fp)

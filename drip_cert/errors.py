@@ -39,3 +39,13 @@ class AssumptionViolation(DripCertError, ArithmeticError):
 
 class SolverError(DripCertError, RuntimeError):
     """A numerical solver failed or returned an answer that did not survive re-checking."""
+
+
+class FingerprintError(DripCertError, ValueError):
+    """Recorded data refused: their fingerprint is not the certificate's, or they carry none.
+
+    Data recorded with another policy or L1-DRAC design say nothing about this certificate
+    (:mod:`drip_cert.model.fingerprint`). The message names the part that differs (``policy``,
+    ``design``) with the recorded and the certified digests. The command line exits with
+    status 1 (the data do not validate the certificate), not 2: the file itself is well formed.
+    """

@@ -7,7 +7,10 @@ Installed with drip-cert as a pytest plugin (entry point ``pytest11``, name
   ``certified`` (``allow_conditional=True`` accepts ``conditional`` too);
 * :func:`assert_gaps_within` ``(spec, data)``: compare recorded gaps (``drip-cert validate SPEC
   --data FILE``, layout in ``docs/data_format.md``) with the spec's certificate; fail unless the
-  validation ``holds`` (a violated bound or nothing checked fails, as exit status 1 does);
+  validation ``holds`` (a violated bound or nothing checked fails, as exit status 1 does; so do
+  data recorded with another policy or design than the certified ones, or without a fingerprint
+  unless ``accept_unfingerprinted=True``, which passes with an :class:`UnfingerprintedData`
+  warning);
 * the fixture ``drip_cert_baseline``: ``drip_cert_baseline.check(spec_or_certificate)`` compares
   the certificate (or validation report) with a snapshot stored next to the test file, in
   ``drip_cert_baselines/<test file stem>.<test name>.json``, by the rules of ``drip-cert diff``
@@ -51,6 +54,7 @@ __all__ = [
     "BASELINE_DIR",
     "Baseline",
     "BaselineChanged",
+    "UnfingerprintedData",
     "assert_certified",
     "assert_gaps_within",
 ]
@@ -64,6 +68,11 @@ UPDATE_FLAG = "--drip-cert-update"
 class BaselineChanged(UserWarning):
     """A certificate changed against its snapshot without a regression (an improvement, or a
     change that is neither): the test passes; ``pytest --drip-cert-update`` records it."""
+
+
+class UnfingerprintedData(UserWarning):
+    """Recorded data without a fingerprint accepted by ``accept_unfingerprinted=True``: nothing
+    shows they were recorded with the certified policy and design."""
 
 
 # ------------------------------------------------------------------------------ helpers
@@ -122,7 +131,13 @@ def assert_certified(spec: Any, *, allow_conditional: bool = False) -> Any:
     pytest.fail("\n".join(lines), pytrace=False)
 
 
-def assert_gaps_within(spec: str | Path, data: str | Path, *, out: str | Path | None = None) -> Any:
+def assert_gaps_within(
+    spec: str | Path,
+    data: str | Path,
+    *,
+    out: str | Path | None = None,
+    accept_unfingerprinted: bool = False,
+) -> Any:
     """Compare recorded data with the certificate of ``spec``; fail unless the validation holds.
 
     Runs what ``drip-cert validate SPEC --data FILE`` runs
@@ -138,18 +153,32 @@ def assert_gaps_within(spec: str | Path, data: str | Path, *, out: str | Path | 
         The recorded trajectories or gap series (``.npz`` or ``.csv``, ``docs/data_format.md``).
     out
         Optional folder for ``validation.json``, ``validation.md`` and ``validation.png``.
+    accept_unfingerprinted
+        Accept data without a ``fingerprint`` (``docs/data_format.md``), with an
+        :class:`UnfingerprintedData` warning; by default they fail the test.
 
     Returns
     -------
     ValidationReport
         The report, when it holds. A violated bound, or a run that checked nothing, fails the
         test with every violated check (bound, empirical value, confidence bound); malformed
-        data fails it with the data error (file, array, problem).
+        data fails it with the data error (file, array, problem); data whose fingerprint is
+        not the certificate's fail it naming the part (``policy``, ``design``) that differs.
     """
     try:
-        rep = validate_recorded(_spec_path(spec), data, out=out)
+        rep = validate_recorded(
+            _spec_path(spec), data, out=out, accept_unfingerprinted=accept_unfingerprinted
+        )
     except DripCertError as exc:
         pytest.fail(f"drip-cert could not validate {data} against {spec}: {exc}", pytrace=False)
+    if rep.result.data.fingerprint is None:  # accepted unverified (else refused above)
+        warnings.warn(
+            UnfingerprintedData(
+                f"{data}: the data carry no fingerprint; accepted unverified by "
+                "accept_unfingerprinted=True"
+            ),
+            stacklevel=2,
+        )
     if rep.status == "holds":
         return rep
     lines = [f"{data} against {spec}: validation {rep.status.upper()}"]

@@ -508,6 +508,7 @@ def validate_recorded(
     *,
     out: str | Path | None = None,
     progress: bool = False,
+    accept_unfingerprinted: bool = False,
 ) -> ValidationReport:
     """``drip-cert validate SPEC --data FILE``: recorded data against the spec's certificate.
 
@@ -516,7 +517,10 @@ def validate_recorded(
     system, with its own learned policy (the one that produced the data; nothing is trained), is
     certified and the data are compared with the certificate with the statistics of the
     simulated validation (:func:`~drip_cert.validate.data.validate_data`). ``out`` receives
-    ``validation.json``, ``validation.md`` and ``validation.png`` (atomically).
+    ``validation.json``, ``validation.md`` and ``validation.png`` (atomically). Data whose
+    fingerprint is not the certificate's are refused (:class:`~drip_cert.errors.FingerprintError`),
+    as are data without one unless ``accept_unfingerprinted``
+    (:func:`~drip_cert.validate.data.check_fingerprint`).
     """
     from drip_cert.validate.data import (  # scipy.stats: keep off the CLI start-up path
         check_fits,
@@ -538,7 +542,11 @@ def validate_recorded(
     run = run_pipeline(spec, train=False, certify=True, progress=progress)
     assert run.certificate is not None  # certify=True
     rep = validate_data(
-        run.certificate, recorded, n_state=s.n, certified_horizon=s.horizon
+        run.certificate,
+        recorded,
+        n_state=s.n,
+        certified_horizon=s.horizon,
+        accept_unfingerprinted=accept_unfingerprinted,
     ).with_notes_before(run.notes)
     if out is not None:
         atomic_write_json(Path(out) / "validation.json", rep.to_dict())

@@ -17,8 +17,10 @@ import shutil
 import numpy as np
 import pytest
 
+from drip_cert.deploy import learned_policy
+from drip_cert.model.fingerprint import Fingerprint
 from drip_cert.schema import load_output
-from drip_cert.testing import assert_certified, assert_gaps_within
+from drip_cert.testing import UnfingerprintedData, assert_certified, assert_gaps_within
 from tests.helpers import ROOT, example_spec, load_script, run_cli
 
 pytest_plugins = ["pytester"]
@@ -129,11 +131,21 @@ def test_worked_example_end_to_end(example, recorder, capsys):
     validate them (exit 0), snapshot the certificate, change the policy, diff exits 1; data of
     another policy violate the certified bound (exit 1); malformed data exit 2."""
     spec, gaps = example / "plant.toml", example / "gaps.npz"
-    np.savez(gaps, **recorder.record(spec, paths=100, seed=0))
+    recorded = recorder.record(spec, paths=100, seed=0)
+    np.savez(gaps, **recorded)
     code, _, _ = run_cli(capsys, "validate", str(spec), "--data", str(gaps), "--out", "out")
     assert code == 0
     rep = assert_gaps_within(spec, gaps, out=example / "out")
     assert rep.status == "holds" and rep.at_certified_parameters
+    assert rep.result.data.fingerprint is not None  # record_gaps.py writes it
+    # without it: refused, unless accepted (with a warning)
+    bare = example / "bare.npz"
+    np.savez(bare, **{k: v for k, v in recorded.items() if k != "fingerprint"})
+    with pytest.raises(pytest.fail.Exception, match="no fingerprint.*--accept-unfingerprinted"):
+        assert_gaps_within(spec, bare)
+    with pytest.warns(UnfingerprintedData, match="no fingerprint"):
+        rep = assert_gaps_within(spec, bare, accept_unfingerprinted=True)
+    assert rep.status == "holds" and any("no fingerprint" in n for n in rep.notes)
     assert {p.name for p in (example / "out").iterdir()} >= {
         "validation.json",
         "validation.md",
@@ -151,17 +163,36 @@ def test_worked_example_end_to_end(example, recorder, capsys):
     )
     assert code == 1 and "rho_TaSIL (rho.rho_tasil) loosened" in out
 
-    # data recorded with another policy than the certified one violate rho_TaSIL
+    # data recorded with another policy than the certified one: refused by their fingerprint
     _set_gain(spec, "-0.90*x", "-0.8*x")
     other = example / "other.npz"
-    np.savez(other, **recorder.record(spec, paths=100, seed=1))
+    recorded = recorder.record(spec, paths=100, seed=1)
+    np.savez(other, **recorded)
     _set_gain(spec, "-0.8*x", PLANT_GAIN)  # checked against the certified policy's certificate
-    code, out, _ = run_cli(capsys, "validate", str(spec), "--data", str(other), "--json")
-    v = json.loads(out)
-    assert code == 1 and v["status"] == "violated"
-    assert {c["name"]: c["status"] for c in v["checks"]}["policy_radius"] == "violated"
-    with pytest.raises(pytest.fail.Exception, match="policy_radius: empirical"):
+    certified = learned_policy(spec).fingerprint.policy
+    old = Fingerprint.parse(recorded["fingerprint"].item()).policy
+    assert old != certified
+    code, out, err = run_cli(capsys, "validate", str(spec), "--data", str(other), "--json")
+    assert code == 1 and out == "" and "Traceback" not in err
+    assert "recorded with another policy" in err
+    assert f"policy={old} in the data" in err and f"policy={certified} certified" in err
+    with pytest.raises(pytest.fail.Exception, match="recorded with another policy"):
         assert_gaps_within(spec, other)
+    # the same data without their fingerprint, accepted unverified: they violate rho_TaSIL
+    np.savez(bare, **{k: v for k, v in recorded.items() if k != "fingerprint"})
+    code, out, _ = run_cli(capsys, "validate", str(spec), "--data", str(bare), "--json")
+    assert code == 1 and out == ""  # refused: no fingerprint
+    code, out, err = run_cli(
+        capsys, "validate", str(spec), "--data", str(bare), "--json", "--accept-unfingerprinted"
+    )
+    v = json.loads(out)
+    assert code == 1 and v["status"] == "violated" and "no fingerprint" in err
+    assert {c["name"]: c["status"] for c in v["checks"]}["policy_radius"] == "violated"
+    with (
+        pytest.warns(UnfingerprintedData),
+        pytest.raises(pytest.fail.Exception, match="policy_radius: empirical"),
+    ):
+        assert_gaps_within(spec, bare, accept_unfingerprinted=True)
 
 
 def test_malformed_data_exits_2_naming_the_array_and_the_problem(example, capsys):

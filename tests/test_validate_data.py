@@ -15,7 +15,9 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from drip_cert.errors import SpecError
+from drip_cert.errors import FingerprintError, SpecError
+from drip_cert.model.fingerprint import Fingerprint, design_fingerprint, fingerprint_of
+from drip_cert.spec import load_spec
 from drip_cert.validate.checks import HOLDS, NOT_CHECKED, VIOLATED
 from drip_cert.validate.data import (
     GAPS,
@@ -24,7 +26,7 @@ from drip_cert.validate.data import (
     minimum_paths,
     validate_data,
 )
-from tests.helpers import by_name, example_spec, run_cli
+from tests.helpers import by_name, example_spec, run_cli, write_spec
 
 SPEC = example_spec("pendulum")
 SEED = 3
@@ -76,6 +78,7 @@ def _record(ctrl, policy, n_paths: int, seed: int) -> dict[str, np.ndarray]:
     out["t"] = np.arange(n_steps // RECORD_EVERY + 1) * (RECORD_EVERY * dt)
     p = ctrl.params
     out["l1_design"] = np.array([p.omega, p.lambda_s, p.Ts])
+    out["fingerprint"] = np.array(str(ctrl.fingerprint))  # what the data were recorded with
     return out
 
 
@@ -199,7 +202,7 @@ def test_the_engine_own_trajectories_as_data_give_the_engine_checks_bit_for_bit(
     from drip_cert.validate.data import _checked
 
     data = _checked(arrays, "engine", "npz", None)
-    rep = validate_data(cert, data, n_state=2, certified_horizon=T)
+    rep = validate_data(cert, data, n_state=2, certified_horizon=T, accept_unfingerprinted=True)
     got = by_name(rep.checks)
     assert [c.name for c in rep.checks] == [c.name for c in ref]
     for c in ref:
@@ -210,7 +213,7 @@ def test_the_engine_own_trajectories_as_data_give_the_engine_checks_bit_for_bit(
 
 def test_missing_processes_are_not_checked_and_say_what_to_add(tmp_path, deployed, recorded):
     cert = deployed[0]
-    nominal = {k: recorded[k] for k in ("t", "expert_nominal", "learned_nominal")}
+    nominal = {k: recorded[k] for k in ("t", "expert_nominal", "learned_nominal", "fingerprint")}
     rep = _validate(cert, _save(tmp_path, nominal))
     checks = by_name(rep.checks)
     assert checks["policy_radius"].status == HOLDS
@@ -228,11 +231,12 @@ def test_gap_series_and_csv_give_the_trajectories_numbers(tmp_path, deployed, re
 
     cert = deployed[0]
     ref = [c.to_dict() for c in _validate(cert, _save(tmp_path, recorded)).checks]
-    gaps = {"t": recorded["t"], "l1_design": recorded["l1_design"]}
+    gaps = {k: recorded[k] for k in ("t", "l1_design", "fingerprint")}
     for g, a, b in GAPS:
         gaps[f"gap_{g}"] = norms_sequential(recorded[a] - recorded[b])
     assert [c.to_dict() for c in _validate(cert, _save(tmp_path, gaps, "g.npz")).checks] == ref
     lines = ["# l1_design: " + ", ".join(repr(float(v)) for v in recorded["l1_design"])]
+    lines.append(f"# fingerprint: {recorded['fingerprint'].item()}")
     lines.append("scenario,path,t,x0,x1")
     for s in SCENARIOS:
         for i in range(N_PATHS):
@@ -341,6 +345,18 @@ def _malformed(recorded):
         ("unpaired", unpaired, "learned_nominal", "starts at"),
         ("horizon", {**recorded, "t": recorded["t"] * 100.0}, "t", "beyond the certified horizon"),
         ("no t", {k: v for k, v in recorded.items() if k != "t"}, "t", "missing"),
+        (
+            "fingerprint text",
+            {**recorded, "fingerprint": np.array("policy=0123")},
+            "fingerprint",
+            "hex digits",
+        ),
+        (
+            "fingerprint dtype",
+            {**recorded, "fingerprint": np.arange(2.0)},
+            "fingerprint",
+            "one string",
+        ),
     ]
 
 
@@ -364,3 +380,103 @@ def test_too_few_paths_for_the_confidence_exit_2(tmp_path, capsys, recorded, cer
     need = math.floor(math.log(0.05 / m) / math.log(0.2)) + 1
     assert "3 paths are too few" in err and f"record at least {need} paths" in err, err
     assert "learned_l1_true, learned_nominal" in err
+
+
+# ------------------------------------------------------------------------- fingerprints
+PENDULUM_LEARNED = 'learned = ["9.81*sin(q) - 3.96*q - 4.04*q_dot"]'
+"""The certified learned policy of examples/pendulum; the tests below change one gain."""
+
+
+def _certified_design(cert):
+    """``(omega, lambda_s, T_s)`` and ``Theta`` (the pendulum is certified in ``z = Theta x``)."""
+    d = cert.l1.design
+    assert cert.coordinates is not None  # so the policy part is checked to be x's, not z's
+    return (d.omega, d.lambda_s, d.Ts), cert.coordinates.theta
+
+
+def _with_fingerprint(recorded, fp):
+    return {**recorded, "fingerprint": np.array(str(fp))}
+
+
+def test_data_of_a_changed_policy_are_refused_naming_the_policy(
+    tmp_path, capsys, deployed, recorded, certified_once
+):
+    """The fingerprint data recorded with the spec's policy after one gain moved (3.96 ->
+    3.95) carry, at the certified design: exit 1, the policy named with both digests."""
+    cert = deployed[0]
+    text = SPEC.read_text()
+    assert PENDULUM_LEARNED in text
+    changed = write_spec(
+        tmp_path, text.replace(PENDULUM_LEARNED, PENDULUM_LEARNED.replace("3.96", "3.95"))
+    )
+    old = fingerprint_of(load_spec(changed).system, *_certified_design(cert))
+    assert old.design == cert.fingerprint.design and old.policy != cert.fingerprint.policy
+    path = _save(tmp_path, _with_fingerprint(recorded, old))
+    code, out, err = run_cli(capsys, "validate", str(SPEC), "--data", str(path), "--json")
+    assert code == 1 and out == "" and "Traceback" not in err
+    assert "recorded with another policy than the certificate's" in err, err
+    assert f"policy={old.policy} in the data" in err
+    assert f"policy={cert.fingerprint.policy} certified" in err
+    assert "design=" not in err  # the design is not blamed
+    with pytest.raises(FingerprintError, match="another policy"):
+        _validate(cert, path)
+
+
+def test_data_of_a_changed_design_are_refused_naming_the_design(
+    tmp_path, capsys, deployed, recorded, certified_once
+):
+    """The same data, recorded (so their fingerprint says) with twice the certified omega."""
+    cert = deployed[0]
+    (omega, lambda_s, ts), theta = _certified_design(cert)
+    x_system = load_spec(SPEC).system
+    assert design_fingerprint(x_system, (omega, lambda_s, ts), theta) == cert.fingerprint.design
+    other = Fingerprint(
+        policy=cert.fingerprint.policy,
+        design=design_fingerprint(x_system, (2.0 * omega, lambda_s, ts), theta),
+    )
+    path = _save(tmp_path, _with_fingerprint(recorded, other))
+    code, out, err = run_cli(capsys, "validate", str(SPEC), "--data", str(path))
+    assert code == 1 and out == ""
+    assert "recorded with another design than the certificate's" in err, err
+    assert f"design={other.design} in the data, design={cert.fingerprint.design} certified" in err
+    assert "policy=" not in err
+
+
+def test_data_without_a_fingerprint_are_refused_unless_the_flag_accepts_them(
+    tmp_path, capsys, recorded, certified_once
+):
+    bare = {k: v for k, v in recorded.items() if k != "fingerprint"}
+    path = _save(tmp_path, bare)
+    code, out, err = run_cli(capsys, "validate", str(SPEC), "--data", str(path))
+    assert code == 1 and out == ""
+    assert "refused: the data carry no fingerprint" in err and "--accept-unfingerprinted" in err
+    code, out, err = run_cli(
+        capsys, "validate", str(SPEC), "--data", str(path), "--accept-unfingerprinted", "--json"
+    )
+    import json
+
+    rep = json.loads(out)
+    assert code == 0 and rep["status"] == "holds"
+    assert "warning" in err and "no fingerprint" in err
+    assert any(n.startswith("WARNING: the data carry no fingerprint") for n in rep["notes"])
+    assert rep["simulation"]["fingerprint"] is None
+    # with a fingerprint the report says which
+    code, out, _ = run_cli(
+        capsys, "validate", str(SPEC), "--data", str(_save(tmp_path, recorded, "fp.npz")), "--json"
+    )
+    assert code == 0 and json.loads(out)["simulation"]["fingerprint"]["policy"] == (
+        Fingerprint.parse(recorded["fingerprint"].item()).policy
+    )
+
+
+def test_the_policy_fingerprint_alone_covers_data_of_the_policy_alone(tmp_path, deployed, recorded):
+    """``learned_policy(spec).fingerprint`` (no design part): enough for the nominal processes,
+    refused for data that hold the L1-DRAC process."""
+    cert, ctrl, policy = deployed
+    assert policy.fingerprint == Fingerprint(policy=cert.fingerprint.policy)
+    assert ctrl.fingerprint == cert.fingerprint
+    nominal = {k: recorded[k] for k in ("t", "expert_nominal", "learned_nominal")}
+    rep = _validate(cert, _save(tmp_path, _with_fingerprint(nominal, policy.fingerprint)))
+    assert rep.status == HOLDS
+    with pytest.raises(FingerprintError, match="no design part"):
+        _validate(cert, _save(tmp_path, _with_fingerprint(recorded, policy.fingerprint), "l1.npz"))

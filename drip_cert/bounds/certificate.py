@@ -35,6 +35,7 @@ from drip_cert.analysis.learned_loop import best_global_rate, sup_policy_differe
 from drip_cert.analysis.mlp_loop import system_mlps
 from drip_cert.bounds.l1drac.system import l1_section
 from drip_cert.errors import AssumptionViolation, DripCertError
+from drip_cert.model.fingerprint import Fingerprint, fingerprint_of
 from drip_cert.model.system import System, box_image
 from drip_cert.numerics.rounding import div_up, mul_up, up
 from drip_cert.progress import Stages
@@ -193,6 +194,7 @@ class Certificate:
     alternatives: tuple[Mapping[str, Any], ...] = ()  #: the other coordinates tried, in summary
     #: the parts not computed: ``(part, "not_requested" | "not_applicable", reason)``
     skipped: tuple[tuple[str, str, str], ...] = ()
+    fingerprint: Fingerprint | None = None  #: of the policy and design, in x (recorded data)
 
     @property
     def verdict(self) -> Verdict:
@@ -383,6 +385,7 @@ class Certificate:
                 "bounds (and what rests on them) depend on this machine's speed and load; "
                 "remove [contraction] max_time for a reproducible certificate",
             },
+            "fingerprint": None if self.fingerprint is None else self.fingerprint.to_dict(),
         }
         out["timings"] = split_timings(out)
         return out
@@ -610,7 +613,8 @@ def _certify_in_metric(
         demos = demonstration_set(spec.system, spec.settings.tasil)
     zdemos = None if demos is None else _demonstrations_in_z(demos, change)
     cert = _certify_in(zspec, zdemos, stage)
-    return dataclasses.replace(cert, coordinates=change)
+    fp = fingerprint_of(spec.system, _deployed_design(cert.l1), change.theta)  # of x, not z
+    return dataclasses.replace(cert, coordinates=change, fingerprint=fp)
 
 
 def _demonstrations_in_z(demos: DemonstrationSet, change: CoordinateChange) -> DemonstrationSet:
@@ -908,6 +912,7 @@ def _certify_in(spec: Spec, demonstrations: DemonstrationSet | None, stage: Stag
         invariance=inv,
         extra_quantities=tuple(extra_q),
         skipped=tuple(skipped),
+        fingerprint=fingerprint_of(s, _deployed_design(l1)),
     )
 
 
@@ -917,6 +922,14 @@ def _tasil_defaults_text(st: Any) -> str:
         f"n = {st.trajectories} demonstrations, heldout = {st.heldout}, k = {st.samples} samples, "
         f"delta = {st.delta:g}, seed = {st.seed}; add a [tasil] table to change them"
     )
+
+
+def _deployed_design(l1: Any) -> tuple[float, float, float] | None:
+    """``(omega, lambda_s, T_s)`` the deployed controller runs (``None``: no feasible design)."""
+    if l1 is None or not l1.feasible:
+        return None
+    d = l1.design
+    return (float(d.omega), float(d.lambda_s), float(d.Ts))
 
 
 def _learned_contraction(

@@ -38,6 +38,7 @@ import numpy as np
 from drip_cert._jax import jax, jnp
 from drip_cert.control.l1drac import L1Params, L1State, l1_init, l1_step
 from drip_cert.errors import SpecError
+from drip_cert.model.fingerprint import Fingerprint
 from drip_cert.model.numeric import SimModel
 
 __all__ = ["L1DRACController", "PolicyFunction"]
@@ -72,6 +73,9 @@ class PolicyFunction:
         The numeric model whose ``learned`` policy is wrapped.
     name
         Free text (the spec's system name), for ``repr``.
+    fingerprint
+        The :class:`~drip_cert.model.fingerprint.Fingerprint` of the policy (``design`` is
+        ``None``): recorded data of this policy carry it (``docs/data_format.md``).
 
     Notes
     -----
@@ -80,7 +84,9 @@ class PolicyFunction:
     the certificate (``System.numeric.learned``), compiled once per batch size.
     """
 
-    def __init__(self, model: SimModel, name: str = "") -> None:
+    def __init__(
+        self, model: SimModel, name: str = "", *, fingerprint: Fingerprint | None = None
+    ) -> None:
         if not isinstance(model, SimModel):
             raise SpecError("model must be a SimModel (System.numeric)", field="model")
         if model.learned is None:
@@ -92,6 +98,7 @@ class PolicyFunction:
         self.n = model.n
         self.m = model.m
         self.name = name or model.name
+        self.fingerprint = fingerprint
         self._fn = jax.jit(jax.vmap(model.learned))
 
     def __call__(self, x: Any) -> np.ndarray:
@@ -122,6 +129,9 @@ class L1DRACController:
         ``z = Theta x``: measurements are mapped to ``z`` before the step.
     verdict
         Free text carried along (the certificate's verdict), for ``repr`` and reports.
+    fingerprint
+        The certificate's :class:`~drip_cert.model.fingerprint.Fingerprint` (policy and design):
+        data recorded with this controller carry it (``docs/data_format.md``).
 
     Examples
     --------
@@ -146,6 +156,7 @@ class L1DRACController:
         *,
         theta: Any = None,
         verdict: str = "",
+        fingerprint: Fingerprint | None = None,
     ) -> None:
         if not isinstance(model, SimModel):
             raise SpecError("model must be a SimModel (System.numeric)", field="model")
@@ -161,6 +172,7 @@ class L1DRACController:
         self.params = params
         self.n, self.m = model.n, model.m
         self.verdict = verdict
+        self.fingerprint = fingerprint
         self._theta: np.ndarray | None = None
         if theta is not None:
             th = np.asarray(theta, dtype=np.float64)

@@ -662,6 +662,10 @@ def read_l1_design(r: TableReader) -> L1DesignValues:
 
 
 # ------------------------------------------------------------------------------ [tasil]
+HELDOUT_FROM_DELTA = -1
+"""``TasilSettings.heldout`` default: derive the count from ``delta`` (:func:`heldout_default`)."""
+
+
 @dataclass(frozen=True)
 class TasilSettings:
     """``[tasil]``: training of the learned policy and the TaSIL certificate."""
@@ -669,9 +673,10 @@ class TasilSettings:
     method: str = "tasil"  #: "tasil" | "bc"
     order: int = 1  #: derivative order of the TaSIL loss (1 or 2)
     trajectories: int = 20  #: the paper's n
-    #: fresh expert trajectories for the held-out form (3.3 c); 0: none; ``None``: the smallest
-    #: count at which that form can pass at ``delta`` (59 at delta = 0.1; :func:`heldout_default`)
-    heldout: int | None = None
+    #: fresh expert trajectories for the held-out form (3.3 c); 0: none; the default
+    #: :data:`HELDOUT_FROM_DELTA` is replaced by the smallest count at which that form can pass at
+    #: ``delta`` (59 at delta = 0.1; :func:`heldout_default`)
+    heldout: int = -1
     samples: int = 100  #: k of the uniform partition of [0, T]
     hidden: tuple[int, ...] = (64, 64)
     activation: str = "tanh"
@@ -713,7 +718,7 @@ class TasilSettings:
     )
 
     def __post_init__(self) -> None:
-        if self.heldout is None:
+        if self.heldout == HELDOUT_FROM_DELTA:
             object.__setattr__(self, "heldout", heldout_default(self.delta))
 
     @classmethod

@@ -12,6 +12,12 @@ radius and the tails with Clopper-Pearson bounds, the total tail by the triangle
 union bound; see :mod:`drip_cert.validate.checks`). W2 between the laws at the last recorded
 time is reported beside its same-law baselines, as in the simulated validation (not checked).
 
+Data recorded with another policy or L1-DRAC design than the certified ones are refused
+(:func:`check_fingerprint`, :class:`~drip_cert.errors.FingerprintError`, exit status 1): the
+file's ``fingerprint`` (``str(controller.fingerprint)``, :mod:`drip_cert.model.fingerprint`)
+must be the certificate's, part by part; a file without one is refused unless
+``accept_unfingerprinted`` accepts it, with a warning in the report.
+
 What data cannot decide is said: a check whose processes are not in the file is ``not_checked``
 ("not in the data"); L1-DRAC checks of data recorded at other parameters than the certified ones
 (``l1_design``) are ``not_checked`` ("not at certified parameters"); times beyond the certified
@@ -33,7 +39,8 @@ from typing import Any
 
 import numpy as np
 
-from drip_cert.errors import SpecError
+from drip_cert.errors import FingerprintError, SpecError
+from drip_cert.model.fingerprint import Fingerprint
 from drip_cert.numerics import stats as _stats
 from drip_cert.validate.checks import (
     NOT_CHECKED,
@@ -48,6 +55,7 @@ __all__ = [
     "DEFAULT_LEVEL",
     "DataResult",
     "RecordedData",
+    "check_fingerprint",
     "check_fits",
     "load_recorded",
     "minimum_paths",
@@ -65,6 +73,9 @@ GAPS = (
     ("uncertainty_l1", "learned_l1_true", "learned_nominal"),
 )
 """The gaps ``(name, a, b)``, ``r_t = ||a_t - b_t||`` (:data:`drip_cert.sim.config.GAPS`)."""
+
+L1_GAPS = ("total_l1", "uncertainty_l1")
+"""The gaps that read the L1-DRAC process ``learned_l1_true``."""
 
 GAP_PREFIX = "gap_"
 """Precomputed gap series are the arrays ``gap_<name>`` (``gap_policy``, ``gap_uncertainty_l1``)."""
@@ -124,6 +135,9 @@ class RecordedData:
         ``(N,)`` bool: path tuples that diverged; unknown in every check (as in the engine).
     l1_design
         ``(omega, lambda_s, T_s)`` the L1-DRAC data were recorded with, or ``None`` (not said).
+    fingerprint
+        The :class:`~drip_cert.model.fingerprint.Fingerprint` the data were recorded with, or
+        ``None`` (not said).
     """
 
     path: str
@@ -134,6 +148,7 @@ class RecordedData:
     gaps: Mapping[str, np.ndarray]
     diverged: np.ndarray
     l1_design: tuple[float, float, float] | None
+    fingerprint: Fingerprint | None = None
 
     @property
     def n_paths(self) -> int:
@@ -181,7 +196,14 @@ class RecordedData:
             "arrays": sorted(self.scenarios) if self.kind == "trajectories" else sorted(self.gaps),
             "gaps": list(self.available_gaps()),
             "l1_design": None if self.l1_design is None else list(self.l1_design),
+            "fingerprint": None if self.fingerprint is None else self.fingerprint.to_dict(),
         }
+
+    @property
+    def has_l1(self) -> bool:
+        """Whether the data hold a process of the L1-DRAC controller (``learned_l1_true`` or
+        the gap series computed from it)."""
+        return "learned_l1_true" in self.scenarios or any(g in self.gaps for g in L1_GAPS)
 
 
 def load_recorded(path: str | Path) -> RecordedData:
@@ -237,14 +259,15 @@ def _checked(
 ) -> RecordedData:
     names = set(arrays)
     gap_names = {GAP_PREFIX + g for g, _, _ in GAPS}
-    allowed = {"t", "diverged", "l1_design"} | set(SCENARIOS) | gap_names
+    allowed = {"t", "diverged", "l1_design", "fingerprint"} | set(SCENARIOS) | gap_names
     unknown = sorted(names - allowed)
     if unknown:
         raise _fail(
             where,
             unknown[0],
             f"unknown array(s) {unknown}: the allowed names are t, {', '.join(SCENARIOS)}, "
-            f"{', '.join(sorted(gap_names))}, diverged, l1_design (docs/data_format.md)",
+            f"{', '.join(sorted(gap_names))}, diverged, l1_design, fingerprint "
+            "(docs/data_format.md)",
         )
     if "t" not in arrays:
         raise _fail(where, "t", "missing: give the recorded times as a 1-D array 't'")
@@ -395,6 +418,7 @@ def _checked(
                 f"must be the three positive numbers [omega, lambda_s, Ts], got {d.tolist()}",
             )
         l1 = (float(d[0]), float(d[1]), float(d[2]))
+    fp = _fingerprint(arrays["fingerprint"], where) if "fingerprint" in arrays else None
     return RecordedData(
         path=where,
         format=fmt,
@@ -404,7 +428,26 @@ def _checked(
         gaps=MappingProxyType(out if not scen else {}),
         diverged=diverged,
         l1_design=l1,
+        fingerprint=fp,
     )
+
+
+def _fingerprint(raw: Any, where: str) -> Fingerprint:
+    """The ``fingerprint`` entry: one string ``"policy=<hex>, design=<hex>"``."""
+    a = np.asarray(raw)
+    if a.dtype.kind not in "US" or a.size != 1:
+        raise _fail(
+            where,
+            "fingerprint",
+            f"must be one string (str(controller.fingerprint)), got shape {a.shape} dtype "
+            f"{a.dtype}",
+        )
+    item = a.reshape(-1)[0]
+    text = item.decode("ascii", "replace") if isinstance(item, bytes) else str(item)
+    try:
+        return Fingerprint.parse(text)
+    except ValueError as exc:
+        raise _fail(where, "fingerprint", str(exc)) from None
 
 
 def _numeric(a: Any, where: str, name: str) -> np.ndarray:
@@ -514,6 +557,8 @@ def _read_csv(p: Path) -> tuple[dict[str, np.ndarray], list[int] | None]:
         try:
             if key == "l1_design":
                 arrays["l1_design"] = np.array([float(v) for v in nums])
+            elif key == "fingerprint":
+                arrays["fingerprint"] = np.array(val)
             elif key == "diverged":
                 want = {int(v) for v in nums}
                 missing = sorted(want - set(ids))
@@ -688,6 +733,72 @@ def check_fits(data: RecordedData, *, n_state: int, certified_horizon: float) ->
         )
 
 
+ACCEPT_FLAG = "--accept-unfingerprinted"
+"""The command-line flag that accepts data without a fingerprint (``accept_unfingerprinted``)."""
+
+
+def check_fingerprint(cert: Any, data: RecordedData, *, accept_unfingerprinted: bool) -> str | None:
+    """Refuse data not recorded with the certified policy and design; the warning, if any.
+
+    Every part the data's fingerprint states must be the certificate's
+    (``Certificate.fingerprint``); the ``design`` part must be stated when the data hold a
+    process of the L1-DRAC controller (:attr:`RecordedData.has_l1`). Data without a fingerprint
+    are refused unless ``accept_unfingerprinted``.
+
+    Returns
+    -------
+    str or None
+        The warning for accepted data without a fingerprint, else ``None``.
+
+    Raises
+    ------
+    FingerprintError
+        Naming the part that differs (``policy``, ``design``) with the recorded and the
+        certified digests, or saying the data carry none and how to accept them.
+    """
+    cert_fp: Fingerprint | None = getattr(cert, "fingerprint", None)
+    certified = "none" if cert_fp is None else str(cert_fp)
+    got = data.fingerprint
+    if got is None:
+        if accept_unfingerprinted:
+            return (
+                "the data carry no fingerprint: accepted unverified (accept_unfingerprinted, "
+                f"{ACCEPT_FLAG}): nothing shows they were recorded with the certified policy and "
+                f"design ({certified})"
+            )
+        raise FingerprintError(
+            f"{data.path}: refused: the data carry no fingerprint, so nothing shows they were "
+            f"recorded with the certified policy and design ({certified}). Record them with "
+            "str(controller.fingerprint) in a 'fingerprint' entry (docs/data_format.md), or "
+            f"accept them unverified with {ACCEPT_FLAG} (accept_unfingerprinted=True in Python)"
+        )
+    if cert_fp is None:
+        raise FingerprintError(
+            f"{data.path}: refused: the certificate has no fingerprint to compare the data's "
+            f"({got}) with"
+        )
+    differ = [
+        f"{part}={getattr(got, part)} in the data, {part}={getattr(cert_fp, part)} certified"
+        for part in ("policy", "design")
+        if getattr(got, part) is not None and getattr(got, part) != getattr(cert_fp, part)
+    ]
+    if differ:
+        parts = " and ".join(d.partition("=")[0] for d in differ)
+        raise FingerprintError(
+            f"{data.path}: refused: the data were recorded with another {parts} than the "
+            f"certificate's ({'; '.join(differ)}). Record them again with this spec's "
+            "drip_cert.deploy.l1drac_controller / learned_policy and their .fingerprint, or "
+            "validate them against the spec they were recorded with"
+        )
+    if got.design is None and data.has_l1:
+        raise FingerprintError(
+            f"{data.path}: refused: the data hold the L1-DRAC process but their fingerprint "
+            f"({got}) has no design part (learned_policy's): record them with "
+            f"str(controller.fingerprint) (certified: {cert_fp})"
+        )
+    return None
+
+
 def validate_data(
     cert: Any,
     data: RecordedData,
@@ -695,6 +806,7 @@ def validate_data(
     n_state: int,
     certified_horizon: float,
     level: float = DEFAULT_LEVEL,
+    accept_unfingerprinted: bool = False,
 ) -> ValidationReport:
     """Check recorded data against certificate ``cert`` (the statistics of the simulated run).
 
@@ -710,6 +822,8 @@ def validate_data(
         ``[0, T]``).
     level
         Confidence level (familywise over the recorded times for per-time checks).
+    accept_unfingerprinted
+        Accept data without a fingerprint (with a warning among the report's notes).
 
     Returns
     -------
@@ -721,8 +835,12 @@ def validate_data(
     SpecError
         State dimension or horizon mismatch, or too few paths for a frequency check the data
         feed (:func:`minimum_paths`).
+    FingerprintError
+        Data recorded with another policy or design, or without a fingerprint
+        (:func:`check_fingerprint`).
     """
     check_fits(data, n_state=n_state, certified_horizon=certified_horizon)
+    warning = check_fingerprint(cert, data, accept_unfingerprinted=accept_unfingerprinted)
     T_end = float(data.times[-1])
     # the certified numbers in the user's x, as drip_cert.validate.run.validate reads them
     design = cert.l1.design if (cert.l1 is not None and cert.l1.feasible) else None
@@ -735,7 +853,7 @@ def validate_data(
     if kappa is not None and coords is not None:
         kappa = coords.gap_in_x(kappa)  # P(||x gap|| >= F kappa) <= P(||z gap|| >= kappa)
     delta_l1 = design.delta if design is not None else None
-    notes: list[str] = []
+    notes: list[str] = [] if warning is None else ["WARNING: " + warning]
     at_cert = design is not None
     why = "no feasible L1-DRAC design"
     if design is not None:

@@ -8,8 +8,9 @@ or another simulator. Usage::
     python record_gaps.py plant.toml gaps.npz [--paths 200] [--seed 0]
 
 Writes ``gaps.npz`` with ``t``, ``expert_nominal``, ``learned_nominal``, ``learned_true``,
-``learned_l1_true`` (each ``(paths, times, 1)``) and ``l1_design``; then run
-``drip-cert validate plant.toml --data gaps.npz``.
+``learned_l1_true`` (each ``(paths, times, 1)``), ``l1_design`` and ``fingerprint`` (the
+certified policy's and design's, ``controller.fingerprint``: validation refuses data recorded
+with another); then run ``drip-cert validate plant.toml --data gaps.npz``.
 """
 
 from __future__ import annotations
@@ -71,6 +72,7 @@ def record(spec: str | Path, paths: int = 200, seed: int = 0) -> dict[str, np.nd
         "learned_true": np.stack(rows["t"], axis=1),
         "learned_l1_true": np.stack(rows["a"], axis=1),
         "l1_design": np.array([p.omega, p.lambda_s, p.Ts]),
+        "fingerprint": np.array(str(controller.fingerprint)),  # what these data were recorded with
     }
 
 
