@@ -82,7 +82,7 @@ from pathlib import Path
 from typing import Any
 
 from drip_cert.errors import SpecError
-from drip_cert.provenance import How
+from drip_cert.provenance import How, is_timing_key
 from drip_cert.schema import LoadedOutput, load_output
 
 __all__ = [
@@ -165,20 +165,6 @@ def constant_direction(name: str) -> tuple[str, str]:
     return UNKNOWN_DIRECTION, "constant"
 
 
-_TIMING_NAMES = frozenset(
-    {"timings", "seconds", "time_s", "wall_s", "elapsed_s", "cpu_s", "compile_s", "run_s"}
-)
-
-
-def is_timing_key(key: str) -> bool:
-    """Whether a JSON key holds a wall-clock timing, which ``diff`` never compares: ``timings``
-    (the key the timings of a run are kept under), ``seconds``, ``time_s``, ``wall_s``,
-    ``elapsed_s``, ``cpu_s``, ``compile_s``, ``run_s`` (the simulation's), and keys ending in
-    ``_time_s``, ``_wall_s`` or ``_seconds``. Not every key ending in ``_s`` is a time:
-    ``lambda_s`` is the L1-DRAC filter bandwidth, so the list is explicit."""
-    return key in _TIMING_NAMES or key.endswith(("_time_s", "_wall_s", "_seconds"))
-
-
 WEAKER_WHEN_LARGER = -1  #: a parameter like delta: larger is a weaker claim
 STRONGER_WHEN_LARGER = 1  #: a parameter like p: larger is a stronger claim
 MUST_BE_EQUAL = 0  #: a parameter like form or coordinates: any change is another claim
@@ -256,6 +242,8 @@ parameter of its claim is unchanged; otherwise the ``claim`` rule reports the cl
 _REPORTED_CLAIMS = ("TaSIL", "L1-DRAC moment", "L1-DRAC tail")
 
 _VERDICT_RANK = {"certified": 0, "conditional": 1, "not_certified": 2}
+#: part verdicts of a part that was not computed: read as an absent part
+_NOT_COMPUTED = ("not_requested", "not_applicable")
 _STATUS_RANK = {"holds": 0, "nothing_checked": 1, "violated": 2}
 
 REGRESSION = "regression"
@@ -418,6 +406,13 @@ def _verdicts(old: Mapping, new: Mapping, pre: str) -> list[Change]:
     for key, name in keys:
         a, b = _get(old, key), _get(new, key)
         if a == b:
+            continue
+        # a part named but not computed (schema 4) counts as absent
+        a = _MISSING if a in _NOT_COMPUTED else a
+        b = _MISSING if b in _NOT_COMPUTED else b
+        if b is _MISSING and a is _MISSING:
+            effect, what = CHANGE, f"{name}: {_get(old, key)} -> {_get(new, key)}"
+            out.append(Change("verdict", pre + key, None, None, effect, what))
             continue
         if b is _MISSING:
             effect, what = REGRESSION, f"{name}: {a} -> no longer computed"

@@ -489,12 +489,26 @@ json_float = _json_float
 
 # ---------------------------------------------------------------------------------- timings
 #: keys that hold wall-clock measurements in the JSON of a result: they vary from run to run, so
-#: :func:`split_timings` moves them under one top-level key that comparisons (``diff``) ignore
-TIMING_KEYS = frozenset({"time_s", "seconds", "wall_time_s", "time_to_below"})
+#: :func:`split_timings` moves them under one top-level key (``timings``) that ``diff`` ignores.
+#: Not every key ending in ``_s`` is a time (``lambda_s`` is the L1-DRAC predictor pole), so the
+#: names are explicit, plus the suffixes of :func:`is_timing_key`
+TIMING_KEYS = frozenset(
+    {"seconds", "time_s", "wall_s", "elapsed_s", "cpu_s", "compile_s", "run_s", "time_to_below"}
+)
+
+
+def is_timing_key(key: str) -> bool:
+    """Whether a JSON key holds a wall-clock timing: one of :data:`TIMING_KEYS`, ``timings``
+    (where they are kept) or a key ending in ``_time_s``, ``_wall_s`` or ``_seconds``."""
+    return (
+        key in TIMING_KEYS
+        or key == "timings"
+        or key.endswith(("_time_s", "_wall_s", "_seconds"))
+    )
 
 
 def split_timings(d: dict[str, Any], prefix: str = "") -> dict[str, Any]:
-    """Remove every timing (a key of :data:`TIMING_KEYS`) from the nested dict ``d`` in place and
+    """Remove every timing (:func:`is_timing_key`) from the nested dict ``d`` in place and
     return them flat, keyed by their dotted path (``contraction.expert.time_s``).
 
     Lists are walked too (the path takes the index). What remains of ``d`` is a function of the
@@ -504,7 +518,7 @@ def split_timings(d: dict[str, Any], prefix: str = "") -> dict[str, Any]:
 
     def walk(node: Any, path: str) -> None:
         if isinstance(node, dict):
-            for k in [k for k in node if k in TIMING_KEYS]:
+            for k in [k for k in node if is_timing_key(k) and k != "timings"]:
                 out[f"{path}{k}"] = node.pop(k)
             for k, v in node.items():
                 walk(v, f"{path}{k}.")

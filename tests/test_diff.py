@@ -11,6 +11,7 @@ import pytest
 from drip_cert.diff import (
     ATOL,
     DEFAULT_RTOL,
+    CHANGE,
     IMPROVEMENT,
     REGRESSION,
     diff_outputs,
@@ -72,8 +73,9 @@ def test_verdict_rule(cert):
     new = copy.deepcopy(cert)
     new["parts"]["l1drac"]["verdict"] = "not_certified"
     assert _only(_diff(cert, new), "verdict", REGRESSION).key == "parts.l1drac.verdict"
-    del new["parts"]["l1drac"]  # a part no longer computed
+    new["parts"]["l1drac"]["verdict"] = "not_requested"  # a part no longer computed
     assert "no longer computed" in _only(_diff(cert, new), "verdict", REGRESSION).text
+    assert "new" in _only(_diff(new, cert), "verdict", CHANGE).text
 
 
 @pytest.mark.parametrize(
@@ -357,7 +359,7 @@ def test_new_verdict_reason_is_a_regression(cert):
 
 
 TIMED = ("time_s", "seconds", "compile_s", "run_s")
-"""The wall-time keys of today's certificate and validation JSON (moved x100 + 1 s below)."""
+"""The wall-time keys of the certificate and validation JSON, all kept under ``timings``."""
 
 
 def test_timings_are_ignored(cert, validation):
@@ -383,17 +385,20 @@ def test_timings_are_ignored(cert, validation):
                     walk(v)
 
         walk(out)
-        # whatever the key holds, even what other rules would read, is never compared
-        out["timings"] = {"certify_s": 1e6, "scope_justified": False, "sound": False}
         return out, found
 
-    for obj, keys in ((cert, {"time_s", "seconds"}), (validation, set(TIMED))):
+    for obj in (cert, validation):
+        # the outputs keep their wall times under "timings" (schema 4): none is left elsewhere
+        assert obj["timings"] and all(k.rsplit(".", 1)[-1] in TIMED for k in obj["timings"])
         new, found = retimed(obj)
-        assert keys <= set(found)  # every timing key these outputs have was moved
-        old = copy.deepcopy(obj)
-        old["timings"] = {"certify_s": 1.0, "scope_justified": True, "sound": True}
-        assert _diff(old, new).changes == ()
+        assert found == []
+        new["timings"] = {k: 100 * v + 1 for k, v in obj["timings"].items()}
         assert _diff(obj, new).changes == ()
+        # whatever the key holds, even what other rules would read, is never compared
+        old = copy.deepcopy(obj)
+        old["timings"] = {"certify_s": 1.0, "rho.rho_total": 1.0, "sound": 1.0}
+        new["timings"] = {"certify_s": 1e6, "rho.rho_total": 1e6, "sound": 0.0}
+        assert _diff(old, new).changes == ()
 
 
 def test_improvements_are_not_regressions(cert):

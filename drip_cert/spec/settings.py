@@ -756,7 +756,8 @@ def heldout_default(delta: float) -> int:
     held-out form (docs/math/tasil.md 3.3 c) can pass at ``delta``: with no trajectory exceeding
     ``tau``, the sound one-sided Clopper-Pearson bound at confidence ``1 - delta/2`` must reach
     ``delta/2`` (:func:`~drip_cert.numerics.stats.min_trials_zero_failures`)."""
-    from drip_cert.numerics.stats import min_trials_zero_failures  # scipy: off the CLI start-up
+    # scipy.stats: keep off the CLI start-up path (only certify needs the default)
+    from drip_cert.numerics.stats import min_trials_zero_failures  # scipy.stats: see above
 
     return min_trials_zero_failures(delta / 2.0, delta / 2.0)
 
@@ -841,7 +842,7 @@ class Settings:
 
     contraction: ContractionSettings = ContractionSettings()
     l1drac: L1Settings = L1Settings()
-    tasil: TasilSettings = TasilSettings()
+    tasil: TasilSettings = field(default_factory=TasilSettings)  # its default needs scipy
     simulation: SimSettings = SimSettings()
     constants: ConstantsTable = ConstantsTable()
     present: frozenset[str] = frozenset()
