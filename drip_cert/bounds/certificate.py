@@ -39,7 +39,7 @@ from drip_cert.model.system import System, box_image
 from drip_cert.numerics.rounding import div_up, mul_up, up
 from drip_cert.progress import Stages
 from drip_cert.provenance import Check, How, Quantity, Scope, Verdict, json_float, verdict_of
-from drip_cert.spec.load import Spec
+from drip_cert.spec.load import Spec, SpecSource, as_spec
 from drip_cert.spec.settings import ContractionSettings
 
 if TYPE_CHECKING:
@@ -419,7 +419,7 @@ def _invariance(s: System, r: Any) -> InvariantSet | None:
 
 
 def certify(
-    spec: Spec | System,
+    spec: SpecSource,
     *,
     demonstrations: DemonstrationSet | None = None,
     policy: MLP | None = None,
@@ -430,9 +430,11 @@ def certify(
     Parameters
     ----------
     spec
-        A loaded :class:`~drip_cert.spec.load.Spec`, or a bare
-        :class:`~drip_cert.model.system.System` (default settings; no ``[l1drac]`` part, and a
-        TaSIL part only when ``demonstrations`` are given).
+        A spec file's path (``str`` or :class:`~pathlib.Path`, loaded here), a loaded
+        :class:`~drip_cert.spec.load.Spec`, or a bare :class:`~drip_cert.model.system.System`
+        (default settings; no ``[l1drac]`` part, and a TaSIL part only when ``demonstrations``
+        are given): :func:`~drip_cert.spec.load.as_spec`. Another type raises
+        :class:`~drip_cert.errors.InputTypeError`.
     demonstrations
         The expert demonstrations the learned policy was trained on
         (:func:`~drip_cert.learn.imitation.demonstration_set`); the TaSIL bound is computed on
@@ -455,8 +457,7 @@ def certify(
     ``"lmi"`` always uses the metric when one is found, a given matrix ``P`` uses that metric,
     ``"euclidean"`` never changes coordinates.
     """
-    if isinstance(spec, System):
-        spec = Spec(None, spec)
+    spec = as_spec(spec)
     if policy is not None:
         from drip_cert.learn.imitation import learned_system  # jax: keep off the API's import path
 
