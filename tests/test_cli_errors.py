@@ -172,7 +172,7 @@ def test_out_below_an_existing_file_is_exit_2(tmp_path, capsys, monkeypatch):
     "argv",
     [
         ["validate", str(PLANT), "--practical-ts", "0"],
-        ["validate", str(PLANT), "--practical-ts", "-1e-3"],
+        ["validate", str(PLANT), "--practical-ts", "-0.001"],
         ["validate", str(PLANT), "--practical-ts", "nan"],
         ["validate", str(PLANT), "--seed", "-5"],
         ["train", str(PLANT), "--out", "o", "--seed", "-1"],

@@ -187,7 +187,9 @@ def validate(
             field="policy.learned",
         )
     if cert is None:
-        from drip_cert.bounds.certificate import certify  # scipy: keep off the API's import path
+        from drip_cert.bounds.certificate import (  # scipy.optimize: keep off the import path
+            certify,
+        )
 
         cert = certify(spec, progress=progress)
     T = float(horizon or s.horizon)
