@@ -17,6 +17,7 @@ _EXPORTS: dict[str, str] = {
     "SpecError": "drip_cert.errors",
     "AssumptionViolation": "drip_cert.errors",
     "SolverError": "drip_cert.errors",
+    "InputTypeError": "drip_cert.errors",
     "Quantity": "drip_cert.provenance",
     "Check": "drip_cert.provenance",
     "How": "drip_cert.provenance",

@@ -2,16 +2,25 @@
 
 Thin by design: parse arguments, call library functions, print. Exit status 0 = certified /
 holds / feasible, 1 = not certified / violated / infeasible (with the reason), 2 = bad input or
-usage (a message on stderr naming the file and field, never a traceback).
+usage (a message on stderr naming the file and field, never a traceback), 3 = an internal error
+(a one-line message asking for a report; the traceback only with ``--debug``).
+
+Every file a command names (``set_defaults(files=...)`` below: specs, data, constants files read;
+``--out`` directories and ``--figure`` files written) is checked before any work starts
+(:mod:`drip_cert.numerics.user_files`), so that a typo costs no seconds of certification or
+minutes of training.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import sys
+import traceback
 from collections.abc import Callable, Sequence
+from pathlib import Path
 from typing import Any
 
 from drip_cert.bounds.l1drac.toml import design_l1_report
@@ -19,6 +28,7 @@ from drip_cert.diff import DEFAULT_RTOL, diff_files, diff_text
 from drip_cert.errors import AssumptionViolation, DripCertError, FingerprintError, SpecError
 from drip_cert.figures_l1 import l1_front_figure
 from drip_cert.numerics.atomic_io import jsonable
+from drip_cert.numerics.user_files import input_file, output_dir, output_file
 from drip_cert.report import certificate_markdown, l1_design_text, train_text, validation_text
 from drip_cert.sim.backend import Backend
 from drip_cert.spec import load_spec
@@ -176,12 +186,13 @@ def build_parser() -> argparse.ArgumentParser:
         prog="drip-cert",
         description="Certificates for DRIP (TaSIL + L1-DRAC): constants, bounds, validation.",
     )
+    p.add_argument("--debug", action="store_true", help=DEBUG_HELP)
     sub = p.add_subparsers(dest="command", required=True)
 
     q = sub.add_parser("check-spec", help="parse and validate a TOML specification only")
     q.add_argument("spec")
     q.add_argument("--json", action="store_true")
-    q.set_defaults(func=cmd_check_spec)
+    q.set_defaults(func=cmd_check_spec, files=[("spec", IN, "specification file")])
 
     q = sub.add_parser("certify", help="compute the certificate of a system")
     q.add_argument("spec")
@@ -192,7 +203,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="exit 0 for a conditional verdict too (one resting on estimates or unproved regions)",
     )
     q.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
-    q.set_defaults(func=cmd_certify)
+    q.set_defaults(func=cmd_certify, files=[("spec", IN, "specification file")])
 
     q = sub.add_parser("design-l1", help="L1-DRAC parameter feasibility from a constants file")
     q.add_argument("constants")
@@ -213,13 +224,16 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument(
         "--figure", default=None, metavar="PATH", help="write the (T_s, rho) Pareto front here"
     )
-    q.set_defaults(func=cmd_design_l1)
+    q.set_defaults(
+        func=cmd_design_l1,
+        files=[("constants", IN, "constants file"), ("figure", FIGURE, "--figure file")],
+    )
 
     q = sub.add_parser("train", help="train an imitation policy (TaSIL or BC)")
     q.add_argument("spec")
     q.add_argument("--method", choices=["tasil", "bc"], default="tasil")
     q.add_argument("--trajectories", type=_posint, default=20)
-    q.add_argument("--seed", type=int, default=0)
+    q.add_argument("--seed", type=_nonneg_int, default=0)
     q.add_argument("--steps", type=_posint, default=None)
     q.add_argument("--out", required=True)
     q.add_argument("--json", action="store_true")
@@ -236,26 +250,29 @@ def build_parser() -> argparse.ArgumentParser:
     )
     q.add_argument(
         "--max-heldout-gap",
-        type=float,
+        type=_positive_or_inf,
         default=None,
         help="exit 1 when the held-out mean gap exceeds this (default: [tasil] max_heldout_gap, "
         "else the size of the held-out expert trajectories)",
     )
-    q.set_defaults(func=cmd_train)
+    q.set_defaults(
+        func=cmd_train,
+        files=[("spec", IN, "specification file"), ("out", OUT_DIR, "--out directory")],
+    )
 
     q = sub.add_parser("validate", help="check a certificate against Monte-Carlo simulation")
     q.add_argument("spec")
     q.add_argument("--trajectories", type=_posint, default=1000, help="simulated paths")
     q.add_argument(
         "--seed",
-        type=int,
+        type=_nonneg_int,
         default=None,
         help="one seed for demonstrations, training and simulation (default: [tasil] seed)",
     )
     q.add_argument("--out", default=None)
     q.add_argument(
         "--practical-ts",
-        type=float,
+        type=_posfloat,
         default=None,
         help="simulate at this T_s when the certified one is impractically small",
     )
@@ -275,16 +292,23 @@ def build_parser() -> argparse.ArgumentParser:
     )
     q.add_argument("--json", action="store_true")
     _add_simulation_options(q)
-    q.set_defaults(func=cmd_validate)
+    q.set_defaults(
+        func=cmd_validate,
+        files=[
+            ("spec", IN, "specification file"),
+            ("data", IN, "--data file"),
+            ("out", OUT_DIR, "--out directory"),
+        ],
+    )
 
     q = sub.add_parser("reproduce", help="reproduce a paper experiment end to end")
     q.add_argument("name", choices=["paper-4d"])
     q.add_argument("--out", default="demo_out")
     q.add_argument("--quick", action="store_true")
-    q.add_argument("--seed", type=int, default=0)
+    q.add_argument("--seed", type=_nonneg_int, default=0)
     q.add_argument("--json", action="store_true")
     _add_simulation_options(q)
-    q.set_defaults(func=cmd_reproduce)
+    q.set_defaults(func=cmd_reproduce, files=[("out", OUT_DIR, "--out directory")])
 
     q = sub.add_parser(
         "diff",
@@ -305,7 +329,11 @@ def build_parser() -> argparse.ArgumentParser:
         help=f"relative tolerance of a bound change (default {DEFAULT_RTOL:g})",
     )
     q.add_argument("--json", action="store_true")
-    q.set_defaults(func=cmd_diff)
+    q.set_defaults(
+        func=cmd_diff, files=[("old", IN, "baseline file"), ("new", IN, "file to compare")]
+    )
+    for q in sub.choices.values():  # `drip-cert CMD ... --debug` works as well as before CMD
+        q.add_argument("--debug", action="store_true", default=argparse.SUPPRESS, help=DEBUG_HELP)
     return p
 
 
@@ -348,6 +376,26 @@ def _nonneg_float(text: str) -> float:
     return v
 
 
+def _posfloat(text: str) -> float:
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number > 0, got {text!r}") from None
+    if not (v > 0 and math.isfinite(v)):
+        raise argparse.ArgumentTypeError(f"expected a finite number > 0, got {text!r}")
+    return v
+
+
+def _positive_or_inf(text: str) -> float:
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number > 0 (or inf), got {text!r}") from None
+    if not v > 0:  # NaN fails too
+        raise argparse.ArgumentTypeError(f"expected a number > 0 (or inf), got {text!r}")
+    return v
+
+
 def _posint(text: str) -> int:
     try:
         v = int(text)
@@ -358,24 +406,88 @@ def _posint(text: str) -> int:
     return v
 
 
+def _nonneg_int(text: str) -> int:
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 0, got {text!r}") from None
+    if v < 0:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 0, got {text!r}")
+    return v
+
+
+# ---------------------------------------------------------------------------- files and errors
+#: roles of the files a command names (``set_defaults(files=[(dest, role, what), ...])``)
+IN, OUT_DIR, FIGURE = "input file", "output directory", "figure file"
+
+DEBUG_HELP = "on an error, also print the traceback (attach it to a bug report)"
+
+
+def check_files(args: argparse.Namespace) -> None:
+    """Check every file the command names before any work starts.
+
+    Inputs must be readable regular files; an output directory must be (or be creatable as) a
+    writable directory, not an existing file; a figure's directory must exist and be writable
+    and its suffix a format matplotlib writes.
+
+    Raises
+    ------
+    SpecError
+        Naming the argument's file and what to give instead (exit status 2).
+    """
+    for dest, role, what in getattr(args, "files", ()):
+        value = getattr(args, dest, None)
+        if value is None:
+            continue
+        if role == IN:
+            input_file(value, what)
+        elif role == OUT_DIR:
+            output_dir(value, what)
+        else:
+            _check_figure(output_file(value, what), what)
+
+
+def _check_figure(path: Path, what: str) -> None:
+    suffix = path.suffix.lower().lstrip(".")
+    if not suffix:
+        raise SpecError(
+            f"the {what} {str(path)!r} has no suffix: end it with .png, .pdf or .svg (the "
+            "suffix picks the format)"
+        )
+    from matplotlib.figure import Figure  # matplotlib: only when a figure is asked for
+
+    formats = Figure().canvas.get_supported_filetypes()
+    if suffix not in formats:
+        raise SpecError(
+            f"the {what} {str(path)!r} ends in .{suffix}, which is no image format matplotlib "
+            f"writes: use one of {', '.join('.' + f for f in sorted(formats))}"
+        )
+
+
+def _report(kind: str, text: str, exc: BaseException, debug: bool) -> None:
+    """The traceback of ``exc`` with ``--debug``, then one line on stderr."""
+    if debug:
+        traceback.print_exception(exc, file=sys.stderr)
+    print(f"drip-cert: {kind}: {' '.join(text.split())}", file=sys.stderr)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point; returns the exit status."""
+    """Entry point; returns the exit status (0, 1, 2 or 3: the module docstring)."""
     parser = build_parser()
     args = parser.parse_args(argv)
+    debug = bool(getattr(args, "debug", False))
     func: Callable[[argparse.Namespace], int] = args.func
     try:
+        check_files(args)
         return func(args)
-    except SpecError as exc:
-        print(f"drip-cert: error: {exc}", file=sys.stderr)
-        return 2
     except AssumptionViolation as exc:
-        print(f"drip-cert: not certified: {exc}", file=sys.stderr)
+        _report("not certified", str(exc), exc, debug)
         return 1
     except FingerprintError as exc:  # recorded data of another policy or design: not evidence
-        print(f"drip-cert: {exc}", file=sys.stderr)
+        _report("refused", str(exc), exc, debug)
         return 1
-    except DripCertError as exc:
-        print(f"drip-cert: error: {exc}", file=sys.stderr)
+    except DripCertError as exc:  # SpecError, InputTypeError, ...: the user's input
+        _report("error", str(exc), exc, debug)
         return 2
     except KeyboardInterrupt:
         print("drip-cert: interrupted", file=sys.stderr)
@@ -386,6 +498,20 @@ def main(argv: Sequence[str] | None = None) -> int:
         except OSError:
             pass
         return 141
+    except OSError as exc:  # the environment: a file that vanished, a full disk, a network
+        where = f"{exc.filename}: " if exc.filename else ""
+        _report("error", f"{where}{exc.strerror or exc}", exc, debug)
+        return 2
+    except Exception as exc:  # a bug of drip-cert: one line, the traceback with --debug
+        command = " ".join(["drip-cert", *(sys.argv[1:] if argv is None else argv)])
+        _report(
+            "internal error",
+            f"{type(exc).__name__}: {exc}; please report it with the command ({command}) and "
+            "its `--debug` output",
+            exc,
+            debug,
+        )
+        return 3
 
 
 if __name__ == "__main__":  # pragma: no cover

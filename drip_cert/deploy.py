@@ -24,13 +24,13 @@ Example::
 from __future__ import annotations
 
 import math
-from pathlib import Path
+import os
 from typing import TYPE_CHECKING, Any
 
 from drip_cert.errors import SpecError
 from drip_cert.model.fingerprint import Fingerprint, policy_fingerprint
 from drip_cert.model.system import System
-from drip_cert.spec.load import Spec, load_spec
+from drip_cert.spec.load import Spec, SpecSource, as_spec
 
 if TYPE_CHECKING:
     from drip_cert.bounds.certificate import Certificate
@@ -39,18 +39,12 @@ if TYPE_CHECKING:
 __all__ = ["l1drac_controller", "learned_policy"]
 
 
-def _spec(source: str | Path | Spec) -> Spec:
-    if isinstance(source, Spec):
-        return source
-    if isinstance(source, str | Path):
-        return load_spec(source)
-    raise SpecError(
-        f"expected a spec file, a Spec or a Certificate, got {type(source).__name__}",
-        field="source",
-    )
+def _spec(source: SpecSource) -> Spec:
+    # a path, a Spec or a System alike; a certificate is taken before this
+    return as_spec(source, argument="source", also="a drip_cert.Certificate")
 
 
-def certificate_of(source: str | Path | Spec | Certificate, progress: bool = False) -> Certificate:
+def certificate_of(source: SpecSource | Certificate, progress: bool = False) -> Certificate:
     """The certificate of ``source``: itself when it is one, else the spec's (certified now).
 
     Raises
@@ -76,7 +70,7 @@ def certificate_of(source: str | Path | Spec | Certificate, progress: bool = Fal
 
 
 def l1drac_controller(
-    source: str | Path | Spec | Certificate,
+    source: SpecSource | Certificate,
     *,
     dt: float | None = None,
     progress: bool = False,
@@ -124,7 +118,7 @@ def l1drac_controller(
         )
     d = l1.design
     if dt is None:
-        if isinstance(source, str | Path | Spec):
+        if isinstance(source, str | os.PathLike | Spec | System):
             sim_dt = _spec(source).settings.simulation.dt
             dt = d.Ts / max(1, math.ceil(d.Ts / sim_dt))
         else:
@@ -140,7 +134,7 @@ def l1drac_controller(
     )
 
 
-def learned_policy(source: str | Path | Spec | Any) -> PolicyFunction:
+def learned_policy(source: SpecSource | Any) -> PolicyFunction:
     """The learned policy ``pi_IL`` of a spec (or certificate) as a plain callable ``x -> u``.
 
     ``source`` is a spec file, a :class:`~drip_cert.spec.load.Spec`, a
@@ -153,15 +147,17 @@ def learned_policy(source: str | Path | Spec | Any) -> PolicyFunction:
 
     if isinstance(source, System):
         s = source
-    elif isinstance(source, str | Path | Spec):
-        s = _spec(source).system
     elif getattr(source, "coordinates", "absent") is None and hasattr(source, "system"):
         s = source.system  # a certificate in the user's coordinates
-    else:
+    elif hasattr(source, "coordinates") and hasattr(source, "system"):
         raise SpecError(
-            "expected a spec file, a Spec, a System, or a certificate in the user's coordinates "
-            "(for one in z = Theta x pass the spec)",
+            "this certificate is in the coordinates z = Theta x: pass the spec for the policy "
+            "in the user's x",
             field="source",
         )
+    else:
+        s = as_spec(
+            source, argument="source", also="a certificate in the user's coordinates"
+        ).system
     fp = Fingerprint(policy=policy_fingerprint(s))
     return PolicyFunction(s.numeric, name=s.name, fingerprint=fp)

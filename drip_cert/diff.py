@@ -419,7 +419,7 @@ def _verdicts(old: Mapping, new: Mapping, pre: str) -> list[Change]:
         elif a is _MISSING:
             effect, what = CHANGE, f"{name}: new, {b}"
         else:
-            ra, rb = _VERDICT_RANK.get(a, 3), _VERDICT_RANK.get(b, 3)
+            ra, rb = _VERDICT_RANK.get(str(a), 3), _VERDICT_RANK.get(str(b), 3)
             effect = REGRESSION if rb > ra else IMPROVEMENT
             what = f"{name}: {a} -> {b}"
         out.append(Change("verdict", pre + key, _plain(a), _plain(b), effect, what))

@@ -33,6 +33,13 @@ class SpecError(DripCertError, ValueError):
         super().__init__(prefix + message)
 
 
+class InputTypeError(DripCertError, TypeError):
+    """An argument of the Python API has a type drip-cert does not accept (e.g. ``load_spec(123)``).
+
+    The message says which types are accepted. The command line exits with status 2.
+    """
+
+
 class AssumptionViolation(DripCertError, ArithmeticError):
     """An assumption of the papers fails for the given system (exit status 1)."""
 

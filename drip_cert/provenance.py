@@ -501,9 +501,7 @@ def is_timing_key(key: str) -> bool:
     """Whether a JSON key holds a wall-clock timing: one of :data:`TIMING_KEYS`, ``timings``
     (where they are kept) or a key ending in ``_time_s``, ``_wall_s`` or ``_seconds``."""
     return (
-        key in TIMING_KEYS
-        or key == "timings"
-        or key.endswith(("_time_s", "_wall_s", "_seconds"))
+        key in TIMING_KEYS or key == "timings" or key.endswith(("_time_s", "_wall_s", "_seconds"))
     )
 
 

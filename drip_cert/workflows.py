@@ -31,6 +31,7 @@ import numpy as np
 from drip_cert.errors import SpecError
 from drip_cert.figures_l1 import l1_front_figure
 from drip_cert.numerics.atomic_io import atomic_write_json, atomic_write_text, jsonable
+from drip_cert.numerics.user_files import output_dir
 from drip_cert.progress import Stages
 from drip_cert.report import (
     certificate_markdown,
@@ -39,7 +40,7 @@ from drip_cert.report import (
     write_validation_outputs,
 )
 from drip_cert.spec import load_spec
-from drip_cert.spec.load import Spec
+from drip_cert.spec.load import Spec, SpecSource, as_spec
 
 if TYPE_CHECKING:
     from drip_cert.bounds.certificate import Certificate
@@ -93,7 +94,7 @@ class PipelineResult:
 
 
 def run_pipeline(
-    spec: Spec,
+    spec: SpecSource,
     *,
     seed: int | None = None,
     train: bool | None = None,
@@ -113,7 +114,8 @@ def run_pipeline(
     Parameters
     ----------
     spec
-        The loaded specification.
+        The specification: a loaded :class:`~drip_cert.spec.load.Spec`, a spec file's path or a
+        :class:`~drip_cert.model.system.System` (:func:`~drip_cert.spec.load.as_spec`).
     seed
         The one seed of the run: demonstrations, training and simulation (default: the spec's
         ``[tasil] seed``). When the spec brings its own policy, the demonstrations for the
@@ -146,6 +148,7 @@ def run_pipeline(
         train_on_system,
     )
 
+    spec = as_spec(spec)
     stage = Stages("pipeline", enabled=progress)
     st = spec.settings.tasil
     seed = st.seed if seed is None else int(seed)
@@ -254,7 +257,7 @@ def _heldout_gap(s: Any, tp: TrainedPolicy, samples: int) -> np.ndarray:
 
 # ---------------------------------------------------------------------------- commands
 def train_from_spec(
-    spec_path: str | Path,
+    spec_path: SpecSource,
     *,
     method: str,
     trajectories: int,
@@ -287,6 +290,7 @@ def train_from_spec(
     """
     from drip_cert.learn.data import save_demonstrations  # jax: keep off the CLI start-up path
 
+    output_dir(out)  # before the training: an --out that is a file fails now, not at the end
     spec = load_spec(spec_path)
     other = "bc" if method == "tasil" else "tasil"
     methods = (method, other) if compare else (method,)
@@ -461,7 +465,7 @@ def _learned_strings(spec: Spec, tp: TrainedPolicy) -> list[str]:
 
 
 def validate_spec(
-    spec_path: str | Path,
+    spec_path: SpecSource,
     *,
     trajectories: int = 1000,
     seed: int | None = None,
@@ -480,6 +484,8 @@ def validate_spec(
     (:func:`~drip_cert.report.write_validation_outputs`) and the simulation (atomically).
     ``backend`` and ``policy_dtype``: see :func:`run_pipeline`.
     """
+    if out is not None:
+        output_dir(out)
     spec = load_spec(spec_path)
     tasil = {"steps": min(spec.settings.tasil.steps, 300)} if quick else None
     run = run_pipeline(
@@ -503,7 +509,7 @@ def validate_spec(
 
 
 def validate_recorded(
-    spec_path: str | Path,
+    spec_path: SpecSource,
     data: str | Path,
     *,
     out: str | Path | None = None,
@@ -528,6 +534,8 @@ def validate_recorded(
         validate_data,
     )
 
+    if out is not None:
+        output_dir(out)
     spec = load_spec(spec_path)
     s = spec.system
     recorded = load_recorded(data)
@@ -586,7 +594,7 @@ def reproduce(
     """``drip-cert reproduce paper-4d``; see the module docstring (``backend``,
     ``policy_dtype``: see :func:`run_pipeline`)."""
     t_start = time.perf_counter()
-    out = Path(out)
+    out = output_dir(out)
     out.mkdir(parents=True, exist_ok=True)
     rs = ReproduceSettings.make(quick)
     spec = load_spec(bundled_spec(name))

@@ -10,8 +10,8 @@ import pytest
 
 from drip_cert.diff import (
     ATOL,
-    DEFAULT_RTOL,
     CHANGE,
+    DEFAULT_RTOL,
     IMPROVEMENT,
     REGRESSION,
     diff_outputs,

@@ -49,7 +49,7 @@ from drip_cert.provenance import (
     split_timings,
     verdict_of,
 )
-from drip_cert.spec.load import Spec
+from drip_cert.spec.load import Spec, SpecSource, as_spec
 from drip_cert.spec.settings import ContractionSettings
 
 if TYPE_CHECKING:
@@ -471,7 +471,7 @@ def _invariance(s: System, r: Any) -> InvariantSet | None:
 
 
 def certify(
-    spec: Spec | System,
+    spec: SpecSource,
     *,
     demonstrations: DemonstrationSet | None = None,
     policy: MLP | None = None,
@@ -482,9 +482,11 @@ def certify(
     Parameters
     ----------
     spec
-        A loaded :class:`~drip_cert.spec.load.Spec`, or a bare
-        :class:`~drip_cert.model.system.System` (default settings; no ``[l1drac]`` part, and a
-        TaSIL part only when ``demonstrations`` are given).
+        A spec file's path (``str`` or :class:`~pathlib.Path`, loaded here), a loaded
+        :class:`~drip_cert.spec.load.Spec`, or a bare :class:`~drip_cert.model.system.System`
+        (default settings; no ``[l1drac]`` part, and a TaSIL part only when ``demonstrations``
+        are given): :func:`~drip_cert.spec.load.as_spec`. Another type raises
+        :class:`~drip_cert.errors.InputTypeError`.
     demonstrations
         The expert demonstrations the learned policy was trained on
         (:func:`~drip_cert.learn.imitation.demonstration_set`); the TaSIL bound is computed on
@@ -507,8 +509,7 @@ def certify(
     ``"lmi"`` always uses the metric when one is found, a given matrix ``P`` uses that metric,
     ``"euclidean"`` never changes coordinates.
     """
-    if isinstance(spec, System):
-        spec = Spec(None, spec)
+    spec = as_spec(spec)
     if policy is not None:
         from drip_cert.learn.imitation import learned_system  # jax: keep off the API's import path
 

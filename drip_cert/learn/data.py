@@ -35,6 +35,7 @@ import numpy as np
 
 from drip_cert._jax import jax, jnp
 from drip_cert.errors import SpecError
+from drip_cert.numerics.user_files import read_npz
 
 DEFAULT_SUBSTEPS = 8
 """RK4 steps per sample interval (T/k); with T/k = 0.1 this gives h = 0.0125."""
@@ -430,13 +431,7 @@ def load_demonstrations(path: str | Path, expert: Policy | None = None) -> Demon
     """
     path = Path(path)
     where = str(path)
-    if not path.is_file():
-        raise SpecError(f"demonstrations file {where!r} does not exist", path=where)
-    try:
-        with np.load(path, allow_pickle=False) as data:
-            arrays = {name: data[name] for name in data.files}
-    except (OSError, ValueError) as exc:
-        raise SpecError(f"cannot read as .npz without pickles: {exc}", path=where) from None
+    arrays = read_npz(path, "demonstrations file")
     for name in ("times", "states"):
         if name not in arrays:
             raise SpecError(

@@ -26,6 +26,7 @@ import numpy as np
 from scipy.special import erf
 
 from drip_cert.errors import SpecError
+from drip_cert.numerics.user_files import input_file, read_npz
 
 ACTIVATIONS = ("tanh", "gelu", "identity")
 _NARROW_INPUT = 8  # MLP.apply_jax writes a first layer this narrow as broadcast products
@@ -234,9 +235,7 @@ def load_mlp(
     ``expect_in``/``expect_out`` check the declared shape. Every problem is a
     :class:`~drip_cert.errors.SpecError` naming the file and what to fix.
     """
-    path = Path(path)
-    if not path.is_file():
-        raise SpecError(f"weights file {str(path)!r} does not exist", field=field)
+    path = input_file(path, "weights file", field=field)
     meta: dict = {}
     mpath = path.with_suffix(".json")
     if mpath.is_file():
@@ -248,13 +247,7 @@ def load_mlp(
             ) from None
         if not isinstance(meta, dict):
             raise SpecError(f"metadata {str(mpath)!r} must be a JSON object", field=field)
-    try:
-        with np.load(path, allow_pickle=False) as data:
-            files = dict(data.items())
-    except (OSError, ValueError) as exc:
-        raise SpecError(
-            f"cannot read weights file {str(path)!r} as .npz without pickles: {exc}", field=field
-        ) from None
+    files = read_npz(path, "weights file", field=field)
     n_layers = 0
     while f"W{n_layers}" in files:
         n_layers += 1

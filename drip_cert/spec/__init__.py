@@ -3,6 +3,6 @@
 Every table is validated when the spec is loaded (:mod:`drip_cert.spec.settings`).
 """
 
-from drip_cert.spec.load import Spec, load_spec, spec_from_dict
+from drip_cert.spec.load import Spec, SpecSource, as_spec, load_spec, spec_from_dict
 
-__all__ = ["Spec", "load_spec", "spec_from_dict"]
+__all__ = ["Spec", "SpecSource", "as_spec", "load_spec", "spec_from_dict"]

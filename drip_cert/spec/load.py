@@ -14,6 +14,7 @@ so that a bad value or an unknown key is found before anything is computed. Ever
 from __future__ import annotations
 
 import math
+import os
 import tomllib
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
@@ -23,11 +24,12 @@ from typing import Any
 
 import sympy as sp
 
-from drip_cert.errors import SpecError
+from drip_cert.errors import InputTypeError, SpecError
 from drip_cert.model.blocks import Block, load_mlp_block
 from drip_cert.model.expr import CONSTANTS, FUNCTIONS, parse_expression
 from drip_cert.model.literals import DecimalFloat
 from drip_cert.model.system import System
+from drip_cert.numerics.user_files import input_file, reading
 from drip_cert.spec.linear import ExpertGain, gain_expert, linear_dynamics, linearise, lqr_expert
 from drip_cert.spec.settings import TABLES, Settings, toml_text
 
@@ -105,23 +107,81 @@ class Spec:
         return self.path.parent if self.path is not None else Path.cwd()
 
 
-def load_spec(path: str | Path) -> Spec:
+SpecSource = str | os.PathLike[str] | Spec | System
+"""What :func:`as_spec` (and every API function built on it) accepts: a spec file's path, a
+:class:`Spec`, or a bare :class:`~drip_cert.model.system.System` (default settings)."""
+
+
+def as_spec(source: SpecSource, *, argument: str = "spec", also: str | None = None) -> Spec:
+    """The :class:`Spec` of a spec file's path, a :class:`Spec` or a :class:`System`.
+
+    The one conversion behind :func:`load_spec`, :func:`~drip_cert.bounds.certificate.certify`,
+    :func:`~drip_cert.validate.validate`, the deploy functions and the workflows: each accepts
+    the three forms alike.
+
+    Parameters
+    ----------
+    source
+        A path (``str`` or :class:`os.PathLike`) of a TOML spec (loaded and validated), a
+        :class:`Spec` (returned as is) or a :class:`System` (wrapped with default settings:
+        ``Spec(None, system)``).
+    argument
+        The parameter's name, for the message of a wrong type.
+    also
+        Another type the caller accepts (handled before calling this), for that message.
+
+    Raises
+    ------
+    InputTypeError
+        ``source`` is none of these (a :class:`TypeError` too).
+    SpecError
+        The file is missing, unreadable or invalid (naming the file, the field and the fix).
+    """
+    if isinstance(source, Spec):
+        return source
+    if isinstance(source, System):
+        return Spec(None, source)
+    if isinstance(source, str | os.PathLike):
+        return _load_file(Path(source))
+    shown = repr(source)
+    if len(shown) > 60:
+        shown = shown[:57] + "..."
+    accepted = [
+        "a spec file's path (str or pathlib.Path)",
+        "a drip_cert.Spec",
+        "a drip_cert.System",
+    ]
+    if also:
+        accepted.append(also)
+    raise InputTypeError(
+        f"{argument}: expected {', '.join(accepted[:-1])} or {accepted[-1]}, got "
+        f"{type(source).__name__} {shown}"
+    )
+
+
+def load_spec(path: SpecSource) -> Spec:
     """Load and validate a TOML specification.
 
     Parameters
     ----------
     path
-        The ``.toml`` file. Relative paths inside it (weights files) are relative to its folder.
+        The ``.toml`` file (``str`` or :class:`os.PathLike`). Relative paths inside it (weights
+        files) are relative to its folder. A :class:`Spec` or a :class:`System` is accepted
+        too (:func:`as_spec`).
 
     Raises
     ------
     SpecError
         Naming the file, the field, the offending value and what is allowed.
+    InputTypeError
+        ``path`` is not a path, a Spec or a System.
     """
-    path = Path(path)
+    return as_spec(path, argument="path")
+
+
+def _load_file(path: Path) -> Spec:
     spath = str(path)
-    if not path.is_file():
-        raise SpecError(f"specification file {spath!r} does not exist")
+    input_file(path, "specification file")
     try:
         with path.open("rb") as fh:
             doc = tomllib.load(fh, parse_float=DecimalFloat)  # floats keep their text
@@ -129,7 +189,8 @@ def load_spec(path: str | Path) -> Spec:
         raise SpecError(f"not valid TOML: {exc}", path=spath) from None
     except (OSError, UnicodeDecodeError) as exc:
         raise SpecError(f"cannot read the file: {exc}", path=spath) from None
-    return spec_from_dict(doc, path=path)
+    with reading(path, "specification file"):
+        return spec_from_dict(doc, path=path)
 
 
 def spec_from_dict(doc: Mapping[str, Any], path: Path | None = None) -> Spec:

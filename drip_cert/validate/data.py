@@ -42,6 +42,7 @@ import numpy as np
 from drip_cert.errors import FingerprintError, SpecError
 from drip_cert.model.fingerprint import Fingerprint
 from drip_cert.numerics import stats as _stats
+from drip_cert.numerics.user_files import input_file, read_npz, reading
 from drip_cert.validate.checks import (
     NOT_CHECKED,
     NOTHING_CHECKED,
@@ -217,16 +218,15 @@ def load_recorded(path: str | Path) -> RecordedData:
         norms, unsorted or unequal time grids, unequal path counts or state dimensions,
         initial states that are not paired, fewer than :data:`MIN_PATHS` paths.
     """
-    p = Path(path)
+    p = input_file(path, "data file")
     where = str(p)
-    if not p.is_file():
-        raise SpecError("no such file", path=where)
     suffix = p.suffix.lower()
     if suffix == ".npz":
         arrays, diverged_ids = _read_npz(p), None
         fmt = "npz"
     elif suffix == ".csv":
-        arrays, diverged_ids = _read_csv(p)
+        with reading(p, "CSV data file"):  # not UTF-8 text, a NUL byte (csv.Error), ...
+            arrays, diverged_ids = _read_csv(p)
         fmt = "csv"
     else:
         raise SpecError(
@@ -238,16 +238,7 @@ def load_recorded(path: str | Path) -> RecordedData:
 
 
 def _read_npz(p: Path) -> dict[str, np.ndarray]:
-    try:
-        with np.load(p, allow_pickle=False) as z:
-            return {k: np.asarray(z[k]) for k in z.files}
-    except ValueError as exc:
-        raise SpecError(
-            f"cannot read the .npz ({exc}); save plain numeric arrays with numpy.savez",
-            path=str(p),
-        ) from None
-    except (OSError, EOFError) as exc:
-        raise SpecError(f"not a readable .npz file ({exc})", path=str(p)) from None
+    return read_npz(p, "data file")  # a text file, a .npy, a damaged archive: SpecError
 
 
 def _fail(where: str, array: str, msg: str) -> SpecError:

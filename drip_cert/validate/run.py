@@ -22,6 +22,7 @@ from typing import Any
 from drip_cert.errors import SpecError
 from drip_cert.model.system import System
 from drip_cert.provenance import split_timings
+from drip_cert.spec.load import SpecSource, as_spec
 from drip_cert.spec.settings import SimSettings
 from drip_cert.validate.checks import (
     HOLDS,
@@ -147,9 +148,9 @@ class ValidationReport:
 
 
 def validate(
-    s: System,
-    cert: Any,
-    sim: SimSettings,
+    s: SpecSource,
+    cert: Any = None,
+    sim: SimSettings | None = None,
     *,
     paths: int,
     seed: int,
@@ -162,6 +163,10 @@ def validate(
 ) -> ValidationReport:
     """Validate certificate ``cert`` of ``s`` (which must have a learned policy) by simulation.
 
+    ``s`` is a :class:`~drip_cert.model.system.System`, a :class:`~drip_cert.spec.load.Spec` or
+    a spec file's path (:func:`~drip_cert.spec.load.as_spec`); ``cert`` defaults to its
+    certificate (computed here) and ``sim`` to its ``[simulation]`` settings. ``practical_ts``
+    and ``horizon``, when given, must be finite and positive.
     ``backend`` (:class:`~drip_cert.sim.backend.Backend`, default local) runs the main
     simulation and changes no number. ``policy_dtype="float32"`` evaluates the learned policy
     of the main run in float32 (opt-in, faster); its effect on the gaps, measured on the first
@@ -175,12 +180,24 @@ def validate(
     """
     from drip_cert.control.l1drac import L1Params  # jax: keep off the API's import path
 
+    spec = as_spec(s, argument="s")
+    s = spec.system
+    sim = spec.settings.simulation if sim is None else sim
+    for name, value in (("practical_ts", practical_ts), ("horizon", horizon)):
+        if value is not None and not (math.isfinite(value) and value > 0):
+            raise SpecError(f"must be a finite number > 0 (seconds), got {value!r}", field=name)
     if s.learned is None:
         raise SpecError(
             "validation needs a learned policy (policy.learned, or train one with "
             "`drip-cert train`)",
             field="policy.learned",
         )
+    if cert is None:
+        from drip_cert.bounds.certificate import (  # scipy.optimize: keep off the import path
+            certify,
+        )
+
+        cert = certify(spec, progress=progress)
     T = float(horizon or s.horizon)
     notes: list[str] = []
     coords = getattr(cert, "coordinates", None)
@@ -189,7 +206,8 @@ def validate(
         # like with like: the certificate's bounds are about the system in z = Theta x; simulate
         # that system from the push-forward of the initial law (docs/math/contraction.md 5.3)
         x0_box, theta = s.support, coords.theta
-        s = cert.system
+        in_z: System = cert.system
+        s = in_z
         notes.append(
             "simulated in the certificate's coordinates z = Theta x (the same law: the initial "
             "law pushed forward by Theta) and validated in the user's x: every gap is of "

@@ -132,6 +132,8 @@ def load_l1_constants(path: str | Path) -> tuple[L1Constants, DesignRequest]:
             data = tomllib.load(fh)
     except OSError as e:
         raise err(f"cannot read the file ({e.strerror}); check the path", field="file") from None
+    except UnicodeDecodeError as e:
+        raise err(f"not a TOML text file ({e})", field="file") from None
     except tomllib.TOMLDecodeError as e:
         raise err(f"not valid TOML: {e}", field="file") from None
     unknown = sorted(set(data) - {"constants", "design"})
