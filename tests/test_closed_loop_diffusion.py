@@ -200,3 +200,77 @@ def test_validation_measures_the_l1_gap_against_the_nominal_sde():
     res = _sim(_sim_model(2.0))
     assert uncertainty_gap_name(res, with_l1=False) == "uncertainty_true_sde"
     assert uncertainty_gap_name(_sim(_sim_model(2.0), extra=()), False) == "uncertainty_true"
+
+
+# ------------------------------------------------- the third term: nominal SDE against the ODE
+
+
+def ou_gap_sup(lam: float, sigma: float, q: int, T: float = 50.0) -> float:
+    """``sup_t ||X*_t - x'_t||_{L_2q}`` for ``dX* = -lam X* dt + sigma dW`` and ``x' = e^{-lam t}
+    x0``: the difference is the OU process from 0, ``N(0, sigma^2 (1 - e^{-2 lam t}) / (2 lam))``,
+    whatever ``x0``."""
+    return ou_sup_norm(0.0, lam, sigma, q, T)
+
+
+@pytest.mark.parametrize("q", [1, 2, 3])
+def test_rho_sde_covers_the_ou_gap_and_is_tight_for_q_1(q):
+    """Proposition 6.6 on the OU process: the bound covers the closed-form gap of every moment
+    order, equals it for q = 1 (rounding only), and a bound 1 % smaller fails there."""
+    cl = closed_loop_constants(_ou([[2]]), "expert", _lam(), True, p=q)
+    gap = cl.rho_sde
+    assert gap is not None and gap.how is How.SOUND and "Prop. 6.6" in gap.note
+    truth = ou_gap_sup(LAM, 2.0, q)
+    assert gap.value >= truth
+    assert gap.value == pytest.approx(math.sqrt((2 * q - 1) * 4.0 / (2 * LAM)), rel=1e-12)
+    if q == 1:
+        assert gap.value <= truth * (1.0 + 1e-6)  # the sup over a 50 s grid: e^{-100} short
+        assert 0.99 * gap.value < truth
+
+
+def test_rho_sde_absent_without_a_diffusion_and_an_estimate_without_a_global_rate():
+    assert closed_loop_constants(_ou(None), "expert", _lam(), True).rho_sde is None
+    est = closed_loop_constants(_ou([[2]]), "expert", _lam(), False).rho_sde
+    assert est is not None and est.how is How.ESTIMATE
+
+
+def test_the_certificate_adds_rho_sde_to_rho(tmp_path):
+    """With a known diffusion the total radius is rho_TaSIL + rho_L1 + rho_sde (the nominal SDE
+    of L1-DRAC is not the ODE TaSIL bounds)."""
+    from drip_cert import certify, load_spec
+    from tests.helpers import write_spec
+
+    spec = write_spec(
+        tmp_path,
+        """
+        [system]
+        name = "ou-learned"
+        states = ["x1"]
+        inputs = ["u"]
+        horizon = 2.0
+        [dynamics]
+        f = ["0"]
+        g = [["1"]]
+        diffusion = [["0.1"]]
+        [policy]
+        expert = ["-x1"]
+        learned = ["-1.01*x1"]
+        [uncertainty]
+        drift = ["0.01*sin(x1)"]
+        [initial]
+        support = [[-0.1, 0.1]]
+        [tasil]
+        trajectories = 4
+        samples = 20
+        [l1drac]
+        p = 1
+        omega = 50.0
+        rho_a = 1.0
+        """,
+    )
+    cert = certify(load_spec(spec))
+    d = cert.to_dict()["rho"]
+    assert cert.rho_sde is not None
+    assert cert.rho_sde == pytest.approx(0.1 / math.sqrt(2 * 1.01), rel=1e-9)
+    if cert.rho_tasil is not None and cert.rho_l1 is not None:
+        assert d["rho_total"] >= cert.rho_tasil + cert.rho_l1 + cert.rho_sde
+    assert d["rho_sde"] == cert.rho_sde

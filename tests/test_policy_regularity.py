@@ -83,6 +83,8 @@ def test_certify_reports_the_failing_assumption(tmp_path, capsys):
     extra = (
         '[blocks.pi_il]\nkind = "mlp"\nweights = "policy.npz"\ninputs = 2\noutputs = 1\n\n'
         "[tasil]\ntrajectories = 4\nheldout = 2\nsamples = 20\n"
+        # a small work budget: the failing assumption under test does not depend on it
+        "[contraction]\nmax_boxes = 100\n"
     )
     _, path = _system(tmp_path, "-0.5*x2 - 0.2*Abs(x2)", learned, extra)
     rc, out, _ = run_cli(capsys, "certify", str(path))

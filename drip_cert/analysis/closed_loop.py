@@ -310,9 +310,60 @@ class ClosedLoopConstants:
     Delta_f: Quantity
     L_f: Quantity
     Delta_star: Quantity
+    #: ``sup_t ||X*_t - x'_t||_{L_2p}``: the nominal SDE (known diffusion) against the ODE ``x'``
+    #: that TaSIL is about (:func:`nominal_sde_gap`); ``None`` without a known diffusion
+    rho_sde: Quantity | None = None
 
     def quantities(self) -> tuple[Quantity, ...]:
+        """The constants of L1-DRAC's assumptions (``rho_sde`` is not one: it adds to ``rho``)."""
         return (self.Delta_f, self.L_f, self.Delta_star)
+
+
+def nominal_sde_gap(
+    r0: float,
+    F0: float,
+    lam: Quantity,
+    p: int,
+    growths: tuple[DiffusionGrowth, ...],
+    method: How,
+    suffix: str = "",
+) -> Quantity:
+    """``sup_t ||X*_t - x'_t||_{L_2p}`` for the nominal SDE ``dX* = F dt + p(t, X*) dW`` and the
+    ODE ``dx' = F dt`` from the same initial state (docs/math/contraction.md Proposition 6.6).
+
+    DRIP's decomposition ``||X - x*|| <= ||X - X*|| + ||X* - x'|| + ||x' - x*||`` needs this middle
+    term when the known diffusion is not zero (L1-DRAC bounds the first, TaSIL the last). The error
+    ``e = X* - x'`` has the drift ``F(x' + e) - F(x')``, which is ``0`` at ``e = 0`` and contracts
+    at ``lam``, and the diffusion ``p(t, x' + e)``; with ``||x'_t|| <= R = r0 + ||F(0)|| / lam``
+    (the ODE, surely) a growth bound ``a0 + a1 ||x|| + a2 ||x||^2`` of ``||p||_F^2`` becomes
+    ``(a0 + a1 R + a2 R^2) + (a1 + 2 a2 R) ||e|| + a2 ||e||^2``, and Proposition 6.5 with
+    ``r0 = 0`` (same start) and ``b = 0`` gives the bound (:func:`sde_moment_bound`). For a bounded
+    diffusion it is ``sqrt((2p - 1) sup||p||_F^2 / (2 lam))``. The smallest over ``growths``.
+    """
+    R = add_up(r0, div_up(F0, lam.value))
+    vals = []
+    for g in growths:
+        a0 = add_up(g.a0, add_up(mul_up(g.a1, R), mul_up(g.a2, sq_up(R))))
+        a1 = add_up(g.a1, mul_up(2.0, mul_up(g.a2, R)))
+        vals.append(sde_moment_bound(0.0, 0.0, lam.value, p, a0, a1, g.a2))
+    i = int(np.argmin(vals))
+    value, growth = vals[i], growths[i]
+    note = (
+        f"sup_t ||X*_t - x'_t||_L{2 * p} (nominal SDE against the ODE, contraction.md Prop. 6.6: "
+        f"lambda = {lam.value:.6g}, sup_t ||x'_t|| <= {R:.6g}; {growth.note})"
+        if math.isfinite(value)
+        else "no finite bound of ||X* - x'|| (contraction.md Prop. 6.6: the known diffusion "
+        f"grows too fast for lambda = {lam.value:.6g}; {growth.note})"
+    )
+    return Quantity.derive(
+        "rho_sde",
+        value,
+        inputs=[lam, growth.quantity],
+        method=method,
+        source="DRIP decomposition with a known diffusion (this project: the nominal SDE of "
+        "L1-DRAC (4b) against the nominal ODE of TaSIL)",
+        note=note + suffix,
+    )
 
 
 def _sde_delta_star(
@@ -367,6 +418,7 @@ def closed_loop_constants(
     global_rate: bool,
     *,
     p_star: int = 1,
+    p: int = 1,
     Delta_p: Quantity | None = None,
 ) -> ClosedLoopConstants:
     """Bound ``Delta_f``, ``L_f``, ``Delta_star`` of the closed loop under ``which`` policy.
@@ -384,6 +436,8 @@ def closed_loop_constants(
     p_star
         The moment order of L1-DRAC Assumption 3 (``Delta_star`` bounds the ``L_{2 p_star}``
         norm); matters only with a known diffusion.
+    p
+        The moment order of ``rho_L1`` (``rho_sde`` bounds the same ``L_{2p}`` norm).
     Delta_p
         The growth constant of the known diffusion (:func:`diffusion_growth`); computed when
         ``None`` and the diffusion is not zero.
@@ -441,7 +495,10 @@ def closed_loop_constants(
                 "||F(0)||",
                 "" if global_ok else " (rate not global: estimate)",
             )
-            return ClosedLoopConstants(dF, lF, dS)
+            gap = nominal_sde_gap(
+                r0, F0, lam, p, growths, method, "" if global_ok else " (rate not global)"
+            )
+            return ClosedLoopConstants(dF, lF, dS, gap)
         bound = add_up(r0, div_up(F0, lam.value))
         dS = Quantity.derive(
             "Delta_star",
@@ -484,6 +541,7 @@ def closed_loop_constants(
                 "||F(t,0)|| sampled at 5 times",
                 " (F(t,0) sampled: estimate)",
             ),
+            nominal_sde_gap(r0, F0, lam, p, growths, How.ESTIMATE, " (F(t,0) sampled: estimate)"),
         )
     return ClosedLoopConstants(
         Quantity("Delta_f", D, How.ESTIMATE, src_f, est_D),

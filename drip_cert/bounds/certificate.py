@@ -231,7 +231,10 @@ class Certificate:
         """Whether ``rho = rho_TaSIL + rho_L1`` is certified: both parts computed and certified
         (a radius with one part missing is no bound on the total gap)."""
         parts = self.part_verdicts()
-        return all(parts[p]["verdict"] == Verdict.CERTIFIED.value for p in ("tasil", "l1drac"))
+        both = all(parts[p]["verdict"] == Verdict.CERTIFIED.value for p in ("tasil", "l1drac"))
+        q = self.rho_sde_quantity
+        sde_ok = q is None or (q.how.proved and math.isfinite(q.value))
+        return both and sde_ok
 
     @property
     def machine_dependent(self) -> tuple[str, ...]:
@@ -269,6 +272,8 @@ class Certificate:
         if self.l1 is not None:
             have = {q.name for q in qs}
             qs.extend(q for q in self.l1.constants.values() if q.name not in have)
+            if self.l1.rho_sde is not None:
+                qs.append(self.l1.rho_sde)
         return qs
 
     @property
@@ -301,11 +306,27 @@ class Certificate:
         return self._in_x(self.rho_tasil_native)
 
     @property
+    def rho_sde_quantity(self) -> Quantity | None:
+        """``sup_t ||X*_t - x'_t||_{L_2p}`` (the nominal SDE against the nominal ODE), present
+        when the system has a known diffusion and the L1-DRAC part was computed."""
+        return None if self.l1 is None else self.l1.rho_sde
+
+    @property
+    def rho_sde(self) -> float | None:
+        """:attr:`rho_sde_quantity` in the user's coordinates ``x``."""
+        q = self.rho_sde_quantity
+        return None if q is None else self._in_x(float(q.value))
+
+    @property
     def rho(self) -> float | None:
-        """``rho = rho_TaSIL + rho_L1`` (DRIP eq. TotalTIG) when both parts exist (rounded up)."""
+        """``rho = rho_TaSIL + rho_L1`` (DRIP eq. TotalTIG) when both parts exist (rounded up);
+        with a known diffusion also ``+ rho_sde``: L1-DRAC's nominal process is then an SDE, and
+        its distance to TaSIL's nominal ODE is the third term of the decomposition
+        (docs/math/contraction.md Proposition 6.6)."""
         if self.rho_l1 is None or self.rho_tasil is None:
             return None
-        return up(self.rho_tasil + self.rho_l1)
+        total = up(self.rho_tasil + self.rho_l1)
+        return total if self.rho_sde is None else up(total + self.rho_sde)
 
     def to_dict(self) -> dict[str, Any]:
         ce = self.contraction_expert
@@ -341,9 +362,16 @@ class Certificate:
             "rho_tasil": json_float(self.rho_tasil) if self.rho_tasil is not None else None,
             "rho_l1": json_float(self.rho_l1) if self.rho_l1 is not None else None,
             "rho_total": json_float(self.rho) if self.rho is not None else None,
+            "rho_sde": json_float(self.rho_sde) if self.rho_sde is not None else None,
             "certified": self.rho_certified,
             "coordinates": "x (the spec's states)",
-            "source": "DRIP eq. (TotalTIG): rho = rho_TaSIL + rho_L1",
+            "source": "DRIP eq. (TotalTIG): rho = rho_TaSIL + rho_L1"
+            + (
+                " + rho_sde (a known diffusion: the nominal SDE of L1-DRAC against the nominal "
+                "ODE of TaSIL, docs/math/contraction.md Prop. 6.6)"
+                if self.rho_sde is not None
+                else ""
+            ),
             "note": "rho_TaSIL is a (1 - delta) radius of max_t ||x'_t - x*_t||, rho_L1 an L_2p "
             "moment bound of ||X_t - x'_t||: their sum is reported as the paper states it, and "
             "validate checks each part with the statistic it bounds",

@@ -47,6 +47,9 @@ class L1Section:
     design: L1Design | None
     error: str = ""
     tradeoff: tuple[TradeoffRow, ...] = ()  #: rows at the design's omega and lambda_s
+    #: ``sup_t ||X*_t - x'_t||_{L_2p}`` with a known diffusion (``None`` without one): the third
+    #: term of ``rho`` (docs/math/contraction.md Proposition 6.6)
+    rho_sde: Quantity | None = None
 
     @property
     def feasible(self) -> bool:
@@ -57,6 +60,7 @@ class L1Section:
         if self.design is None:
             out.update(feasible=False, reason=self.error)
         out["constants_used"] = {k: q.to_dict() for k, q in self.constants.items()}
+        out["rho_sde"] = None if self.rho_sde is None else self.rho_sde.to_dict()
         out["tradeoff"] = [
             {"rho_a": r.rho_a, "Ts_max": r.Ts_max, "rho": r.rho} for r in self.tradeoff
         ]
@@ -99,7 +103,13 @@ def l1_section(
         )
     q["lambda"] = lam.renamed("lambda", source="L1-DRAC Assumption 2 (" + which + " closed loop)")
     cl = closed_loop_constants(
-        s, which, lam, global_rate, p_star=st.p_star or st.p, Delta_p=unc_q.get("Delta_p")
+        s,
+        which,
+        lam,
+        global_rate,
+        p_star=st.p_star or st.p,
+        p=st.p,
+        Delta_p=unc_q.get("Delta_p"),
     )
     for qq in cl.quantities():
         q[qq.name] = qq
@@ -166,6 +176,7 @@ def l1_section(
             "constants without a finite value: "
             + ", ".join(f"{k} ({q[k].note})" for k in bad)
             + "; give them in [constants]",
+            rho_sde=cl.rho_sde,
         )
     # the [constants] mapping of L1Constants.from_mapping: reals, the ints p_star, m, the bool lip_f
     values: dict[str, Any] = {k: v.value for k, v in q.items()}
@@ -175,7 +186,7 @@ def l1_section(
     try:
         consts = L1Constants.from_mapping(values)
     except AssumptionViolation as exc:
-        return L1Section(q, None, str(exc))
+        return L1Section(q, None, str(exc), rho_sde=cl.rho_sde)
     req = DesignRequest(
         p=st.p,
         lambda_s=st.lambda_s,
@@ -193,4 +204,4 @@ def l1_section(
     # a feasible design has omega and lambda_s (condition (24) was verified)
     if d.feasible and d.omega is not None and d.lambda_s is not None:
         rows = tradeoff_table(consts, d.p, d.omega, d.lambda_s)
-    return L1Section(q, d, tradeoff=rows)
+    return L1Section(q, d, tradeoff=rows, rho_sde=cl.rho_sde)
