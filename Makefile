@@ -4,7 +4,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test test-all lint proofs bench clean
+.PHONY: demo test test-slow test-all lint proofs bench clean
 
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PY) -m venv $(VENV)
@@ -23,6 +23,11 @@ test: $(STAMP)
 	$(BIN)/ruff format --check .
 	$(BIN)/mypy
 	$(BIN)/python -m pytest -m "not slow" -q
+
+# the slow group: end-to-end runs (train, reproduce, the gallery, Dask) and long proofs; CI runs it
+# after `make test`
+test-slow: $(STAMP)
+	$(BIN)/python -m pytest -m slow -q
 
 test-all: $(STAMP)
 	$(BIN)/python -m pytest -q

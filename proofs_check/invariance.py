@@ -61,7 +61,7 @@ def check_invariant_sets(ctx: Context, radius_factor: float = 1.0) -> CheckResul
         B = np.array([[-half, half], [-half, half]])
         s = float(rng.uniform(0.1, 0.4))
         D = np.array([[-s, s], [-s, s]])
-        r = contraction_rate(F.jacobian([x1, x2]), (x1, x2), B, max_time_s=5.0)
+        r = contraction_rate(F.jacobian([x1, x2]), (x1, x2), B, max_boxes=2000)
         if not r.holds:
             continue
         fn = sp.lambdify((x1, x2), list(F), "numpy")

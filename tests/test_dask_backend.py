@@ -22,6 +22,9 @@ from tests.helpers import PAPER_4D_SPEC, ROOT
 
 distributed = pytest.importorskip("distributed")
 
+#: a LocalCluster of worker processes per test: end to end, in the slow group (make test-all, CI)
+pytestmark = pytest.mark.slow
+
 # the system of tests/test_engine.py (picked up from there, so both compare the same runs)
 from tests.test_engine import _CFG, _arrays, _mlp_model, _x0, _x0_bar  # noqa: E402
 

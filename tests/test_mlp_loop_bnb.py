@@ -135,7 +135,7 @@ def test_local_jacobian_lipschitz_dominates_sampled_difference_quotients():
     dec = decompose_jacobian(J, X, mlps)
     assert dec is not None
     box = np.array([[-0.5, 0.5], [-0.5, 0.5]])
-    res = local_jacobian_lipschitz(dec, box, tol=0.05, max_time_s=5.0)
+    res = local_jacobian_lipschitz(dec, box, tol=0.05, max_boxes=20_000)
     rng = np.random.default_rng(6)
     a = rng.uniform(-0.5, 0.5, (2000, 2))
     b = np.clip(a + rng.normal(scale=0.05, size=a.shape), -0.5, 0.5)
@@ -168,14 +168,12 @@ def test_contraction_rate_mlp_bnb_route_proves_a_rate_and_beats_interval_bnb():
     mlp = _mlp("tanh", seed=7)
     J, mlps, _ = _loop(mlp, gain=0.3)
     box = np.array([[-1.0, 1.0], [-1.0, 1.0]])
-    res = contraction_rate(J, X, box, mlps=mlps, max_time_s=5.0)
+    res = contraction_rate(J, X, box, mlps=mlps, max_boxes=20_000)
     assert res.method == "mlp-bnb" and res.how == How.SOUND and res.holds
     assert res.scope.box == ((-1.0, 1.0), (-1.0, 1.0)) and "only on the box" in res.note
     assert res.max_mu_upper - res.max_mu_sampled <= res.tolerance
     enclose = block_enclose_callback({"h": mlp_block("h", mlp)})
-    old = contraction_rate(
-        J, X, box, method="interval-bnb", enclose=enclose, max_time_s=5.0, max_boxes=400
-    )
+    old = contraction_rate(J, X, box, method="interval-bnb", enclose=enclose, max_boxes=400)
     assert res.max_mu_upper <= old.max_mu_upper + 1e-9
     # the sampled maximum of both routes agree (same grid), the sound bounds bracket it
     assert res.max_mu_sampled <= res.max_mu_upper
@@ -188,5 +186,5 @@ def test_matrix_bnb_on_a_wider_network_reaches_its_tolerance():
     J, mlps, _ = _loop(mlp, gain=0.3)
     dec = decompose_jacobian(J, X, mlps)
     assert dec is not None
-    out = matrix_bnb(dec, np.array([[-1.0, 1.0], [-1.0, 1.0]]), "mu2", tol=1e-3, max_time_s=30)
+    out = matrix_bnb(dec, np.array([[-1.0, 1.0], [-1.0, 1.0]]), "mu2", tol=1e-3, max_boxes=200_000)
     assert out.result.converged and out.upper < 0

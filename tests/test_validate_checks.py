@@ -307,11 +307,20 @@ def test_diverged_paths_make_a_hold_inconclusive_but_not_a_violation():
 # ---------------------------------------------------------------------------- end to end
 
 
-def test_cli_validate_exit_status_matches_report_status(capsys):
+def test_cli_validate_exit_status_matches_report_status(capsys, tmp_path):
+    # the infeasible example with a policy under certification (the expert's gains 1 % off),
+    # so that validate does not train one first (minutes): what is tested is the exit status
+    text = example_spec("infeasible_2d").read_text()
+    text = text.replace(
+        'expert = ["-x1 - 2*x2"]', 'expert = ["-x1 - 2*x2"]\nlearned = ["-1.01*x1 - 2*x2"]'
+    )
+    text += "\n[tasil]\ntrajectories = 4\nsamples = 20\n"
+    spec = tmp_path / "infeasible_learned.toml"
+    spec.write_text(text)
     code, out, _ = run_cli(
         capsys,
         "validate",
-        str(example_spec("infeasible_2d")),
+        str(spec),
         "--quick",
         "--json",
         "--trajectories",
@@ -327,3 +336,6 @@ def test_cli_validate_exit_status_matches_report_status(capsys):
     for c in rep["checks"]:
         if c["name"] in ("uncertainty_gap", "uncertainty_L2_norm", "tail_frequency", "total_tail"):
             assert c["status"] == NOT_CHECKED
+    # the policy radius needs no L1-DRAC design: it is checked, against a finite radius
+    radius = next(c for c in rep["checks"] if c["name"] == "policy_radius")
+    assert radius["status"] in (HOLDS, VIOLATED) and radius["bound"] is not None

@@ -1,7 +1,8 @@
 """End-to-end runs: reproduce paper-4d --quick, the gallery's quick runs, train and validate.
 
-The quick suite keeps one run of each command (``reproduce``, ``train``, one gallery example);
-the other gallery examples are marked slow, each with the quick tests that cover what it checks.
+Every test here is end to end (minutes of training, certification and simulation together), so
+the module is in the ``slow`` group: ``make test-all`` and CI run it, the inner loop (``make
+test``) does not. The parts each run composes are tested quickly elsewhere (named below).
 """
 
 from __future__ import annotations
@@ -11,6 +12,8 @@ import json
 import pytest
 
 from tests.helpers import CLOSED_FORM_TOL, ROOT, example_spec, load_script, run_cli
+
+pytestmark = pytest.mark.slow
 
 
 def test_reproduce_paper_4d_quick(tmp_path, monkeypatch, capsys):
@@ -47,26 +50,25 @@ def test_reproduce_paper_4d_quick(tmp_path, monkeypatch, capsys):
         assert any("not at certified parameters" in c["note"] for c in val["checks"])
 
 
-# One gallery run stays in the quick suite: infeasible_2d, the cheapest, whose summary says the
-# most (not certified, and why). The other two run the same code (examples/gallery.py run_one, i.e.
-# run_pipeline, certificate_markdown and reproduce_figure, which test_reproduce_paper_4d_quick
-# runs as well); what their summaries are checked for is covered quickly elsewhere:
+# The gallery's quick runs (examples/gallery.py run_one: run_pipeline, certificate_markdown and
+# reproduce_figure). What their summaries are checked for is also covered quickly elsewhere:
 # - nonlinear_2d, "DRIP-A2 holds": test_cli.py::test_certify_nonlinear_example_is_sound_on_box
 #   (sound rate > 0, exit 0) and test_verdicts.py::test_support_box_invariant_with_zero_room
 #   (certified);
-# - unmatched_2d (files written, nothing else checked): test_cli.py::test_certify_markdown.
+# - infeasible_2d, "L1DRAC-A7 fails": test_cli.py::test_certify_infeasible_example_says_why;
+# - the natural-coordinate examples: test_coordinates.py (their certificates, the pendulum's
+#   validation at the certified parameters).
 @pytest.mark.parametrize(
     "name",
     [
-        pytest.param("unmatched_2d", marks=pytest.mark.slow),
-        pytest.param("nonlinear_2d", marks=pytest.mark.slow),
+        "unmatched_2d",
+        "nonlinear_2d",
         "infeasible_2d",
         # the natural-coordinate examples: certified in z = Theta x and validated in x at the
-        # certified L1-DRAC parameters; one in the quick suite (the certificates of all three
-        # are checked quickly in test_coordinates.py, and the pendulum's validation too)
+        # certified L1-DRAC parameters
         "van_der_pol",
-        pytest.param("pendulum", marks=pytest.mark.slow),
-        pytest.param("cart_pole", marks=pytest.mark.slow),
+        "pendulum",
+        "cart_pole",
     ],
 )
 def test_gallery_quick_run(name, tmp_path):

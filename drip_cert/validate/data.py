@@ -63,8 +63,15 @@ __all__ = [
     "validate_data",
 ]
 
-SCENARIOS = ("expert_nominal", "learned_nominal", "learned_true", "learned_l1_true")
-"""The four processes (:data:`drip_cert.sim.config.SCENARIOS`; a test keeps them equal)."""
+SCENARIOS = (
+    "expert_nominal",
+    "learned_nominal",
+    "learned_true",
+    "learned_l1_true",
+    "nominal_sde",
+)
+"""The processes (:data:`drip_cert.sim.config.SCENARIOS`; a test keeps them equal): the four of
+the paper, and L1-DRAC's nominal SDE (4b) for a system with a known diffusion."""
 
 GAPS = (
     ("policy", "learned_nominal", "expert_nominal"),
@@ -72,6 +79,8 @@ GAPS = (
     ("uncertainty_true", "learned_true", "learned_nominal"),
     ("total_l1", "learned_l1_true", "expert_nominal"),
     ("uncertainty_l1", "learned_l1_true", "learned_nominal"),
+    ("uncertainty_true_sde", "learned_true", "nominal_sde"),
+    ("uncertainty_l1_sde", "learned_l1_true", "nominal_sde"),
 )
 """The gaps ``(name, a, b)``, ``r_t = ||a_t - b_t||`` (:data:`drip_cert.sim.config.GAPS`)."""
 
