@@ -67,6 +67,7 @@ def test_cert(drip_cert_baseline):
 """
 
 
+@pytest.mark.slow  # an inner pytest run per step, each certifying: end to end
 def test_baseline_fails_on_a_regression_and_passes_after_the_update_flag(warm, pytester):
     spec = pytester.path / "plant.toml"
     shutil.copy(EXAMPLE / "plant.toml", spec)
@@ -126,6 +127,7 @@ def test_assert_certified_passes_and_fails_on_the_verdict():
 
 
 # ------------------------------------------------------------------- the worked example
+@pytest.mark.slow  # the README's four steps, each a certify or a validation: end to end
 def test_worked_example_end_to_end(example, recorder, capsys):
     """The README's steps: record gaps with the controller object in a plain numpy loop,
     validate them (exit 0), snapshot the certificate, change the policy, diff exits 1; data of
