@@ -10,15 +10,8 @@ Network convention (:class:`drip_cert.model.mlp.MLP`): ``z_0 = x``, ``a_k = W_k 
 ``z_{k+1} = s_k(a_k)`` where ``s_k`` is the hidden activation for ``k < L-1`` and the output
 activation (identity when ``None``) for ``k = L-1``. All norms are Euclidean / spectral.
 
-Activation constants (proved in :func:`activation_bounds`)
-
-======== ======================== ====================== ============================
-name     slope range [inf s', sup s']   sup |s'|          sup |s''|
-======== ======================== ====================== ============================
-tanh     [0, 1]                    1                     4/(3 sqrt 3) ~ 0.7698
-gelu     [-0.12893, 1.12893]       1.12893               sqrt(2/pi) ~ 0.79788
-identity [1, 1]                    1                     0
-======== ======================== ====================== ============================
+Activation constants: each activation class of :mod:`drip_cert.model.activations` proves its
+slope range and curvature bound (:attr:`~drip_cert.model.activations.Activation.bounds`).
 
 Floating-point soundness (:mod:`drip_cert.numerics.rounding` owns the rules): the activation
 constants are
@@ -40,34 +33,29 @@ sound as long as numpy and scipy meet their documented accuracy.
 
 from __future__ import annotations
 
-import functools
 import math
 from dataclasses import dataclass
 
 import numpy as np
-from flint import arb
-from scipy.special import ndtr
 
 from drip_cert.errors import SpecError
-from drip_cert.model.mlp import MLP, activation_fn
+from drip_cert.model.activations import Activation, ActivationBounds, get_activation
+from drip_cert.model.mlp import MLP
+from drip_cert.numerics.interval_np import (
+    affine_enclosure,
+    matmul_point_left,
+    scale_rows,
+)
 from drip_cert.numerics.rounding import (
-    LIBM_REL,
     add_up,
     add_up_np,
-    arb_bounds,
-    arb_hi,
-    arb_lo,
-    down_np,
     gamma,
     mul_up,
-    ndtr_rel_budget,
     norm2_up_np,
     spectral_norm_upper,
     sqrt_up,
-    sub_down_np,
     sym_lambda_max_upper,
     up_np,
-    widen_np,
 )
 from drip_cert.provenance import Check, How, Quantity
 
@@ -75,6 +63,7 @@ __all__ = [
     "ActivationBounds",
     "LipSDPResult",
     "activation_bounds",
+    "check_box",
     "enclose_activation",
     "enclose_activation_prime",
     "enclose_jacobian",
@@ -95,153 +84,30 @@ _CLARABEL_MAX_DIM = 48
 # (the rigorous re-check alone decides whether the certificate holds)
 _RHO_MARGIN_REL = 1e-7
 _RHO_MARGIN_ABS = 1e-12
-_SQRT2 = math.sqrt(2.0)
-_INV_SQRT_2PI = 1.0 / math.sqrt(2.0 * math.pi)  # float, for point evaluations (estimates) only
 
 
-# --------------------------------------------------------------------------- Arb constants
+def activation_bounds(name: str | Activation | None) -> ActivationBounds:
+    """Global slope range and curvature bound of an activation (``None``: identity); the proofs
+    are in the classes of :mod:`drip_cert.model.activations`."""
+    return get_activation(name).bounds
 
 
-def _arb_Phi(z: arb) -> arb:
-    """Normal CDF in Arb, ``erfc(-z / sqrt 2) / 2`` (no cancellation in the left tail)."""
-    return (-z / arb(2).sqrt()).erfc() / 2
+def enclose_activation(name: str | Activation | None, lo, hi) -> tuple[np.ndarray, np.ndarray]:
+    """Sound enclosure of the activation over ``[lo, hi]`` (:meth:`Activation.enclose`)."""
+    return get_activation(name).enclose(lo, hi)
 
 
-def _arb_phi(z: arb) -> arb:
-    """Normal density in Arb."""
-    return (-z * z / 2).exp() / (2 * arb.pi()).sqrt()
-
-
-def _arb_gelu_prime(z: arb) -> arb:
-    return _arb_Phi(z) + z * _arb_phi(z)
-
-
-@dataclass(frozen=True)
-class _Consts:
-    """Rigorous float bounds of the constants the enclosures need: enclosures ``(lo, hi)`` of
-    sqrt 2 and 1/sqrt(2 pi), bounds of GELU' and a bracket of GELU's minimiser."""
-
-    sqrt2: tuple[float, float]
-    inv_sqrt_2pi: tuple[float, float]
-    gelu_prime_max: float  # upper bound of max GELU' = GELU'(sqrt 2)
-    gelu_prime_min: float  # lower bound of min GELU' = GELU'(-sqrt 2)
-    gelu_argmin_bracket: tuple[float, float]  # [a, b] containing the minimiser z* of GELU
-    gelu_min_lo: float  # lower bound of min GELU
-
-
-@functools.cache
-def _consts() -> _Consts:
-    """Rigorous float bounds of the constants the enclosures need (computed once, in Arb)."""
-    sqrt2 = arb(2).sqrt()
-    sqrt2_bounds = arb_bounds(sqrt2)
-    inv_sqrt_2pi = arb_bounds(1 / (2 * arb.pi()).sqrt())
-    # GELU' = Phi + z phi has its global max at +sqrt 2 and global min at -sqrt 2
-    gelu_prime_max = arb_hi(_arb_gelu_prime(sqrt2))
-    gelu_prime_min = arb_lo(_arb_gelu_prime(-sqrt2))
-    # the minimiser z* of GELU (the zero of GELU'): a float estimate, then a bracket [a, b] whose
-    # signs are verified in Arb; GELU' < 0 on (-inf, z*) and > 0 on (z*, inf) (see
-    # activation_bounds), so z* in [a, b], and for z in [a, b] (all < 0)
-    # z Phi(z) >= a Phi(z) >= a Phi(b): a rigorous lower bound of min GELU
-    from scipy.optimize import brentq  # scipy.optimize: keep off the API's import path
-
-    zs = float(brentq(lambda z: float(_gelu_prime(z)), -1.0, -0.5, xtol=1e-15))
-    a, b = zs - 1e-12, zs + 1e-12
-    if not (arb_hi(_arb_gelu_prime(arb(a))) < 0.0 < arb_lo(_arb_gelu_prime(arb(b)))):
-        raise ArithmeticError("could not bracket the minimiser of GELU")  # pragma: no cover
-    return _Consts(
-        sqrt2=sqrt2_bounds,
-        inv_sqrt_2pi=inv_sqrt_2pi,
-        gelu_prime_max=gelu_prime_max,
-        gelu_prime_min=gelu_prime_min,
-        gelu_argmin_bracket=(a, b),
-        gelu_min_lo=arb_lo(arb(a) * _arb_Phi(arb(b))),
-    )
-
-
-# --------------------------------------------------------------------------- activations
-# --------------------------------------------------------------------------- activations
-
-
-@dataclass(frozen=True)
-class ActivationBounds:
-    """Slope and curvature bounds of one activation function (each rounded outward).
-
-    Attributes
-    ----------
-    name
-        ``"tanh"``, ``"gelu"`` or ``"identity"``.
-    slope_lo, slope_hi
-        ``inf s'`` and ``sup s'`` over the real line (slope restriction of LipSDP).
-    abs_slope
-        ``sup |s'|`` (the factor of the product Lipschitz bound).
-    abs_curv
-        ``sup |s''|`` (the factor of the Jacobian-Lipschitz bound).
-    """
-
-    name: str
-    slope_lo: float
-    slope_hi: float
-    abs_slope: float
-    abs_curv: float
-
-
-def _gelu_prime(z):
-    """GELU'(z) = Phi(z) + z phi(z) for the exact (erf) GELU (float; a point value, not a bound)."""
-    z = np.asarray(z, dtype=np.float64)
-    return ndtr(z) + z * _INV_SQRT_2PI * np.exp(-0.5 * z * z)
-
-
-def _tanh_prime(z):
-    """tanh'(z) = sech^2 z = 4 e^{-2|z|} / (1 + e^{-2|z|})^2 (float; a point value). Unlike
-    ``1 - tanh(z)^2`` it keeps full relative accuracy for large ``|z|``."""
-    e = np.exp(-2.0 * np.abs(np.asarray(z, dtype=np.float64)))
-    return 4.0 * e / ((1.0 + e) * (1.0 + e))
-
-
-def activation_bounds(name: str | None) -> ActivationBounds:
-    """Slope range and curvature bound of an activation, with the proof.
-
-    * tanh: ``tanh' = 1 - tanh^2 in (0, 1]``; ``tanh'' = -2 tanh (1 - tanh^2)``; with
-      ``u = tanh in (-1, 1)`` the map ``2u(1-u^2)`` peaks at ``u = 1/sqrt 3``, so
-      ``sup |tanh''| = 4 / (3 sqrt 3)``.
-    * GELU (exact, ``z Phi(z)``): ``GELU' = Phi + z phi``, ``GELU'' = phi (2 - z^2)``, vanishing at
-      ``z = +-sqrt 2``, so ``sup GELU' = GELU'(sqrt 2) ~ 1.12893`` and
-      ``inf GELU' = GELU'(-sqrt 2) ~ -0.12893`` (limits 1 and 0 at infinity);
-      ``GELU''' = phi z (z^2 - 4)`` vanishes at ``0, +-2``, ``|GELU''(0)| = 2 phi(0) = sqrt(2/pi)``
-      and ``|GELU''(+-2)| = 2 phi(2) ~ 0.108``, so ``sup |GELU''| = sqrt(2/pi) ~ 0.79788``.
-      ``GELU'`` decreases from 0 to ``GELU'(-sqrt 2) < 0``, increases to ``GELU'(sqrt 2) > 0``
-      and decreases to 1: it is negative before its single zero ``z* ~ -0.7518`` and positive
-      after, so ``GELU`` decreases up to ``z*`` and increases after it.
-    * identity: slope 1, curvature 0.
-
-    Every value is evaluated in Arb and rounded outward.
-    """
-    return _activation_bounds(None if name == "identity" else name)
-
-
-@functools.cache
-def _activation_bounds(name: str | None) -> ActivationBounds:
-    if name is None:
-        return ActivationBounds("identity", 1.0, 1.0, 1.0, 0.0)
-    if name == "tanh":
-        curv = arb_hi(arb(4) / (3 * arb(3).sqrt()))
-        return ActivationBounds("tanh", 0.0, 1.0, 1.0, curv)
-    if name == "gelu":
-        c = _consts()
-        hi, lo = float(c.gelu_prime_max), float(c.gelu_prime_min)
-        curv = arb_hi((2 / arb.pi()).sqrt())
-        return ActivationBounds("gelu", lo, hi, max(hi, abs(lo)), curv)
-    raise SpecError(
-        f"activation {name!r} has no regularity bounds; use 'tanh', 'gelu' or 'identity'",
-        field="activation",
-    )
+def enclose_activation_prime(
+    name: str | Activation | None, lo, hi
+) -> tuple[np.ndarray, np.ndarray]:
+    """Sound enclosure of the (Clarke) slopes over ``[lo, hi]``
+    (:meth:`Activation.slope_range`)."""
+    return get_activation(name).slope_range(lo, hi)
 
 
 def _layer_activations(mlp: MLP) -> list[ActivationBounds]:
     """Activation bounds of each layer ``k = 0..L-1`` (the last is the output activation)."""
-    n = len(mlp.weights)
-    hidden = activation_bounds(mlp.activation)
-    return [hidden] * (n - 1) + [activation_bounds(mlp.output_activation)]
+    return [a.bounds for a in mlp.activations]
 
 
 def _spec_norm(w: np.ndarray) -> float:
@@ -276,7 +142,8 @@ def lipschitz_product(mlp: MLP) -> Quantity:
         value,
         How.SOUND,
         "DRIP Assumption PolicyRegularity (a)",
-        f"product of spectral norms times sup|s'| ({mlp.activation}), global on R^n",
+        f"product of spectral norms times sup|s'| ({', '.join(mlp.activation_specs)}), "
+        "global on R^n",
     )
 
 
@@ -324,6 +191,18 @@ def _lipsdp_blocks(mlp: MLP) -> tuple[np.ndarray, np.ndarray]:
     return A, B
 
 
+def _neuron_slopes(mlp: MLP) -> tuple[np.ndarray, np.ndarray]:
+    """The slope restriction ``[alpha_i, beta_i]`` of every hidden neuron (its layer's global
+    Clarke slope range, :attr:`Activation.bounds`), stacked in the order of
+    :func:`_lipsdp_blocks`."""
+    lo, hi = [], []
+    for w, act in zip(mlp.weights[:-1], mlp.activations[:-1]):
+        bnd = act.bounds
+        lo.append(np.full(w.shape[0], bnd.slope_lo))
+        hi.append(np.full(w.shape[0], bnd.slope_hi))
+    return np.concatenate(lo), np.concatenate(hi)
+
+
 def _lipsdp_matrix(mlp: MLP, lam: np.ndarray, rho: float) -> np.ndarray:
     """The LipSDP-Neuron matrix ``M(lam, rho)``; ``M <= 0`` certifies ``L <= sqrt(rho)``.
 
@@ -352,10 +231,10 @@ def _lipsdp_matrix_and_error(
     """
     A, B = _lipsdp_blocks(mlp)
     n0 = mlp.in_dim
-    act = activation_bounds(mlp.activation)
-    a, b = act.slope_lo, act.slope_hi
+    a, b = _neuron_slopes(mlp)
     T = np.diag(lam)
-    M = -2.0 * a * b * A.T @ T @ A + (a + b) * (A.T @ T @ B + B.T @ T @ A) - 2.0 * B.T @ T @ B
+    Tab, Tapb = np.diag(lam * a * b), np.diag(lam * (a + b))
+    M = -2.0 * A.T @ Tab @ A + (A.T @ Tapb @ B + B.T @ Tapb @ A) - 2.0 * B.T @ T @ B
     M[:n0, :n0] -= rho * np.eye(n0)
     last = mlp.weights[-1]
     k = last.shape[1]
@@ -363,14 +242,15 @@ def _lipsdp_matrix_and_error(
     M = 0.5 * (M + M.T)
     aA, aB = np.abs(A), np.abs(B)
     mag = (
-        2.0 * abs(a * b) * aA.T @ T @ aA
-        + abs(a + b) * (aA.T @ T @ aB + aB.T @ T @ aA)
+        2.0 * aA.T @ np.abs(Tab) @ aA
+        + (aA.T @ np.abs(Tapb) @ aB + aB.T @ np.abs(Tapb) @ aA)
         + 2.0 * aB.T @ T @ aB
     )
     mag[:n0, :n0] += abs(rho) * np.eye(n0)
     mag[-k:, -k:] += np.abs(last).T @ np.abs(last)
     N = A.shape[0]
-    err = add_up_np(up_np(2.0 * gamma(N + k + 8) * mag), (N + k + 8) * 8 * _TINY)
+    # N + k + 8 operations as before, plus the two roundings of lam * a * b and lam * (a + b)
+    err = add_up_np(up_np(2.0 * gamma(N + k + 10) * mag), (N + k + 10) * 8 * _TINY)
     return M, err
 
 
@@ -381,8 +261,10 @@ def lipschitz_lipsdp(
 
     Solves ``min rho`` subject to ``M(lam, rho) <= -margin * s * I``, ``lam >= 0`` with cvxpy
     (``s`` = the scale of the output weights), where ``M`` is given by :func:`_lipsdp_matrix`; the
-    slope restriction is ``[inf s', sup s']`` of the hidden activation (tanh ``[0, 1]``, GELU
-    ``[-0.1289, 1.1289]``). Only the per-neuron multiplier version is used (the coupled
+    slope restriction of each neuron is ``[inf s', sup s']`` of its layer's activation (tanh and
+    relu ``[0, 1]``, GELU ``[-0.1289, 1.1289]``; for relu the Clarke slopes, which LipSDP's
+    incremental quadratic constraint covers since relu is slope-restricted in that sector).
+    Only the per-neuron multiplier version is used (the coupled
     "LipSDP-Network" variant is known to be unsound).
 
     Re-check (the certificate never rests on the solver's float): with the returned multipliers
@@ -432,14 +314,13 @@ def lipschitz_lipsdp(
     scale = max(1.0, _spec_norm(ws[-1]) ** 2)
     lam = cp.Variable(N, nonneg=True)
     rho = cp.Variable(nonneg=True)
-    act = activation_bounds(mlp.activation)
     A, B = _lipsdp_blocks(mlp)
-    a, b = act.slope_lo, act.slope_hi
+    a, b = _neuron_slopes(mlp)
     # M(lam, rho) = sum_i lam_i M_i + C - rho E0, assembled as one dense linear map (fast to
     # canonicalise; the numpy re-check rebuilds M independently from A^T T A products)
     Mi = (
-        -2.0 * a * b * np.einsum("ij,ik->ijk", A, A)
-        + (a + b) * (np.einsum("ij,ik->ijk", A, B) + np.einsum("ij,ik->ijk", B, A))
+        -2.0 * (a * b)[:, None, None] * np.einsum("ij,ik->ijk", A, A)
+        + (a + b)[:, None, None] * (np.einsum("ij,ik->ijk", A, B) + np.einsum("ij,ik->ijk", B, A))
         - 2.0 * np.einsum("ij,ik->ijk", B, B)
     )
     G = Mi.reshape(N, d * d).T
@@ -467,7 +348,7 @@ def lipschitz_lipsdp(
     rho_v = rho_v * (1.0 + _RHO_MARGIN_REL) + _RHO_MARGIN_ABS * scale
     Mn, err = _lipsdp_matrix_and_error(mlp, lam_v, rho_v)
     top = float(sym_lambda_max_upper(Mn, err))
-    out_slope = activation_bounds(mlp.output_activation).abs_slope
+    out_slope = mlp.activations[-1].bounds.abs_slope
     chk = Check.compare(
         "lipsdp.recheck",
         top,
@@ -539,6 +420,15 @@ def jacobian_lipschitz_bound(mlp: MLP) -> Quantity:
     Quantity
         ``L_dpi``, :attr:`How.SOUND`, global on R^n.
     """
+    if not mlp.smooth:
+        rough = [a.spec for a in mlp.activations if not a.smooth]
+        return Quantity(
+            "L_dpi",
+            math.inf,
+            How.SOUND,
+            "DRIP Assumption PolicyRegularity (b)",
+            f"not Lipschitz: the activation {rough[0]} has a discontinuous slope",
+        )
     P, Q = 1.0, 0.0
     for w, act in zip(mlp.weights, _layer_activations(mlp)):
         nw = _spec_norm(w)
@@ -556,192 +446,24 @@ def jacobian_lipschitz_bound(mlp: MLP) -> Quantity:
 
 
 def jacobian_np(mlp: MLP, x: np.ndarray) -> np.ndarray:
-    """Exact forward-mode Jacobian of ``mlp`` at ``x`` (``(..., in)``), shape ``(..., out, in)``."""
+    """Forward-mode Jacobian of ``mlp`` at ``x`` (``(..., in)``), shape ``(..., out, in)`` (float;
+    at a kink of a piecewise-linear activation, one element of the Clarke Jacobian)."""
     x = np.asarray(x, dtype=np.float64)
-    acts = [mlp.activation] * (len(mlp.weights) - 1) + [mlp.output_activation]
     z = x
     J = np.broadcast_to(np.eye(mlp.in_dim), (*x.shape[:-1], mlp.in_dim, mlp.in_dim))
-    for w, bias, act in zip(mlp.weights, mlp.biases, acts):
+    for w, bias, act in zip(mlp.weights, mlp.biases, mlp.activations):
         a = z @ w.T + bias
-        d = _act_prime(act, a)
-        J = d[..., :, None] * (w @ J)
-        z = activation_fn(act, np)(a)
+        J = act.prime_np(a)[..., :, None] * (w @ J)
+        z = act.value_np(a)
     return J
-
-
-def _act_prime(name: str | None, a: np.ndarray) -> np.ndarray:
-    if name is None or name == "identity":
-        return np.ones_like(a)
-    if name == "tanh":
-        return _tanh_prime(a)
-    if name == "gelu":
-        return _gelu_prime(a)
-    raise SpecError(f"activation {name!r} is not supported", field="activation")
 
 
 # --------------------------------------------------------------------------- interval enclosures
 
 
-def _mid_rad(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Centre and radius with ``[m - r, m + r] ⊇ [lo, hi]`` in exact arithmetic (each difference
-    is one rounding, moved up)."""
-    m = lo + 0.5 * (hi - lo)
-    r = up_np(np.maximum(hi - m, m - lo))
-    return m, r
-
-
-def _affine(w: np.ndarray, b: np.ndarray, lo: np.ndarray, hi: np.ndarray):
-    """Sound enclosure of ``W z + b`` for ``z`` in the box ``[lo, hi]`` (batched, ``(..., in)``).
-
-    ``W z + b = (W m + b) + W (z - m)`` with ``|W (z - m)| <= |W| r``. The float ``c = W m + b``
-    and ``rad = |W| r`` are within ``gamma_{k+1} (|W| |m| + |b|)`` and ``gamma_k |W| r`` of the
-    exact values (Higham Thm 3.1, any summation order); ``2 gamma_{k+2}`` times the float
-    ``(|m| + r) |W|^T + |b|`` covers both (and its own rounding). The two final sums are rounded
-    outward one at a time.
-    """
-    m, r = _mid_rad(lo, hi)
-    c = m @ w.T + b
-    aw = np.abs(w)
-    rad = r @ aw.T
-    k = w.shape[1]
-    err = add_up_np(
-        up_np(2.0 * gamma(k + 2) * ((np.abs(m) + r) @ aw.T + np.abs(b))), (k + 2) * 8 * _TINY
-    )
-    return sub_down_np(sub_down_np(c, rad), err), add_up_np(add_up_np(c, rad), err)
-
-
-# ---- activations and their derivatives, pointwise enclosures (vectorised)
-
-
-def _exp_bounds(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Enclosure of ``exp(x)`` at float points ``x`` (numpy ``exp`` widened by ``LIBM_REL``)."""
-    lo, hi = widen_np(np.exp(x), LIBM_REL)
-    return np.maximum(lo, 0.0), hi
-
-
-def _Phi_bounds(z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Enclosure of the normal CDF ``Phi(z)`` (scipy ``ndtr``: ``erfc`` in the tails, no
-    cancellation) widened by its error budget
-    :func:`~drip_cert.numerics.rounding.ndtr_rel_budget`."""
-    lo, hi = widen_np(ndtr(z), ndtr_rel_budget(z))
-    return np.clip(lo, 0.0, 1.0), np.clip(hi, 0.0, 1.0)
-
-
-def _phi_bounds(z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Enclosure of the normal density ``exp(-z^2/2) / sqrt(2 pi)``: ``z^2/2`` rounded both
-    ways, ``exp`` decreasing in it, ``1/sqrt(2 pi)`` from Arb."""
-    c_lo, c_hi = _consts().inv_sqrt_2pi
-    zz = z * z
-    h_lo = down_np(0.5 * down_np(zz))
-    h_hi = up_np(0.5 * up_np(zz))
-    e_lo, _ = _exp_bounds(-h_hi)
-    _, e_hi = _exp_bounds(-h_lo)
-    return down_np(e_lo * c_lo), up_np(e_hi * c_hi)
-
-
-def _scale_point(z: np.ndarray, lo: np.ndarray, hi: np.ndarray):
-    """Enclosure of ``z * v`` for float points ``z`` and ``v`` in ``[lo, hi]``."""
-    pos = z >= 0
-    return (
-        down_np(np.where(pos, z * lo, z * hi)),
-        up_np(np.where(pos, z * hi, z * lo)),
-    )
-
-
-def _gelu_point(z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Enclosure of ``GELU(z) = z Phi(z)`` at float points (never ``1 + erf``)."""
-    return _scale_point(z, *_Phi_bounds(z))
-
-
-def _gelu_prime_point(z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Enclosure of ``GELU'(z) = Phi(z) + z phi(z)`` at float points."""
-    p_lo, p_hi = _Phi_bounds(z)
-    q_lo, q_hi = _scale_point(z, *_phi_bounds(z))
-    return down_np(p_lo + q_lo), up_np(p_hi + q_hi)
-
-
-def _sech2_bounds(a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Enclosure of ``tanh'(a) = sech^2(a) = 4 e / (1 + e)^2``, ``e = exp(-2a)``, for ``a >= 0``.
-
-    ``2a`` is exact, ``e`` is enclosed in ``[0, 1]``, and ``4e / (1 + e)^2`` increases with ``e``
-    there, so the ends come from the ends of ``e`` with every operation rounded outward. No
-    cancellation: the relative accuracy is that of ``exp`` for every ``a`` (``1 - tanh^2`` is 0
-    in float for ``a > 19``, where ``sech^2 a > 1e-17``).
-    """
-    e_lo, e_hi = _exp_bounds(-2.0 * a)
-    e_lo, e_hi = np.clip(e_lo, 0.0, 1.0), np.clip(e_hi, 0.0, 1.0)
-    d_hi = up_np(1.0 + e_lo)
-    d_lo = down_np(1.0 + e_hi)
-    lo = down_np(4.0 * e_lo / up_np(d_hi * d_hi))
-    hi = up_np(4.0 * e_hi / down_np(d_lo * d_lo))
-    return np.clip(lo, 0.0, 1.0), np.clip(hi, 0.0, 1.0)
-
-
-def enclose_activation(name: str | None, lo, hi) -> tuple[np.ndarray, np.ndarray]:
-    """Sound enclosure of the activation ``s`` over ``[lo, hi]`` (elementwise, any shape).
-
-    tanh is increasing (numpy ``tanh`` at the ends, widened by its error budget); GELU
-    ``z Phi(z)`` decreases up to its minimiser ``z* ~ -0.7518`` and increases after it: over an
-    interval on one side the ends give the range, otherwise the range is from a rigorous lower
-    bound of ``min GELU`` (Arb) to the larger end value.
-    """
-    lo = np.asarray(lo, dtype=np.float64)
-    hi = np.asarray(hi, dtype=np.float64)
-    if name is None or name == "identity":
-        return lo, hi
-    if name == "tanh":
-        ylo, _ = widen_np(np.tanh(lo), LIBM_REL)
-        _, yhi = widen_np(np.tanh(hi), LIBM_REL)
-        return np.clip(ylo, -1.0, 1.0), np.clip(yhi, -1.0, 1.0)
-    if name == "gelu":
-        c = _consts()
-        a, b = c.gelu_argmin_bracket
-        l_lo, l_hi = _gelu_point(lo)
-        h_lo, h_hi = _gelu_point(hi)
-        left = hi <= a  # [lo, hi] inside (-inf, z*]: decreasing
-        right = lo >= b  # inside [z*, inf): increasing
-        ylo = np.where(left, h_lo, np.where(right, l_lo, c.gelu_min_lo))
-        yhi = np.where(left, l_hi, np.where(right, h_hi, np.maximum(l_hi, h_hi)))
-        return ylo, yhi
-    raise SpecError(f"activation {name!r} is not supported", field="activation")
-
-
-def enclose_activation_prime(name: str | None, lo, hi) -> tuple[np.ndarray, np.ndarray]:
-    """Sound enclosure of the derivative ``s'`` over ``[lo, hi]`` (elementwise, any shape).
-
-    tanh: ``sech^2`` is even and decreasing in ``|z|``: its range is
-    ``[sech^2(max |z|), sech^2(min |z|)]`` (:func:`_sech2_bounds`). GELU: ``GELU'`` decreases on
-    ``(-inf, -sqrt 2]``, increases on ``[-sqrt 2, sqrt 2]`` and decreases after, so its minimum over
-    an interval is at an end unless the interval contains ``-sqrt 2`` (then the global minimum
-    ``GELU'(-sqrt 2)``, Arb), and likewise the maximum with ``+sqrt 2``.
-    """
-    lo = np.asarray(lo, dtype=np.float64)
-    hi = np.asarray(hi, dtype=np.float64)
-    if name is None or name == "identity":
-        return np.ones_like(lo), np.ones_like(hi)
-    if name == "tanh":
-        a_max = np.maximum(np.abs(lo), np.abs(hi))
-        a_min = np.where((lo <= 0.0) & (hi >= 0.0), 0.0, np.minimum(np.abs(lo), np.abs(hi)))
-        return _sech2_bounds(a_max)[0], _sech2_bounds(a_min)[1]
-    if name == "gelu":
-        c = _consts()
-        s_lo, s_hi = c.sqrt2
-        l_lo, l_hi = _gelu_prime_point(lo)
-        h_lo, h_hi = _gelu_prime_point(hi)
-        # may contain -sqrt2 / +sqrt2 (conservative: the global extreme is always a valid bound)
-        has_min = (lo <= -s_lo) & (hi >= -s_hi)
-        has_max = (lo <= s_hi) & (hi >= s_lo)
-        dlo = np.where(has_min, c.gelu_prime_min, np.minimum(l_lo, h_lo))
-        dhi = np.where(has_max, c.gelu_prime_max, np.maximum(l_hi, h_hi))
-        return dlo, dhi
-    raise SpecError(f"activation {name!r} is not supported", field="activation")
-
-
-_act_interval = enclose_activation
-_act_prime_interval = enclose_activation_prime
-
-
-def _check_box(mlp: MLP, lo, hi) -> tuple[np.ndarray, np.ndarray]:
+def check_box(mlp: MLP, lo, hi) -> tuple[np.ndarray, np.ndarray]:
+    """``(lo, hi)`` as float arrays of shape ``(..., in_dim)``, finite, ``lo <= hi``; else a
+    :class:`~drip_cert.errors.SpecError` saying which entry is wrong."""
     lo = np.asarray(lo, dtype=np.float64)
     hi = np.asarray(hi, dtype=np.float64)
     if lo.shape != hi.shape or lo.shape[-1:] != (mlp.in_dim,):
@@ -766,60 +488,40 @@ def enclose_output(mlp: MLP, lo, hi) -> tuple[np.ndarray, np.ndarray]:
     ``x`` in the box ``[lo, hi]``.
 
     ``lo``, ``hi`` have shape ``(..., in)`` (a batch of boxes is enclosed at once); the result has
-    shape ``(..., out)``. Affine layers use the centre-radius form with a rigorous rounding term;
-    tanh is monotone; GELU is decreasing then increasing around its minimiser ``z* ~ -0.7518``.
+    shape ``(..., out)``. Affine layers use the centre-radius form with a rigorous rounding term
+    (:func:`~drip_cert.numerics.interval_np.affine_enclosure`); each activation encloses its
+    values over the pre-activation interval (:meth:`Activation.enclose`).
     """
-    lo, hi = _check_box(mlp, lo, hi)
-    acts = [mlp.activation] * (len(mlp.weights) - 1) + [mlp.output_activation]
-    for w, b, act in zip(mlp.weights, mlp.biases, acts):
-        lo, hi = _affine(w, b, lo, hi)
-        lo, hi = _act_interval(act, lo, hi)
+    lo, hi = check_box(mlp, lo, hi)
+    for w, b, act in zip(mlp.weights, mlp.biases, mlp.activations):
+        lo, hi = affine_enclosure(w, b, lo, hi)
+        lo, hi = act.enclose(lo, hi)
     return lo, hi
-
-
-def _interval_matmul_point_left(w: np.ndarray, jlo: np.ndarray, jhi: np.ndarray):
-    """Enclosure of ``W J`` for a point matrix ``W`` and an interval matrix ``J`` (batched); the
-    rounding terms as in :func:`_affine`."""
-    m, r = _mid_rad(jlo, jhi)
-    c = w @ m
-    aw = np.abs(w)
-    rad = aw @ r
-    k = w.shape[1]
-    err = add_up_np(up_np(2.0 * gamma(k + 2) * (aw @ (np.abs(m) + r))), (k + 2) * 8 * _TINY)
-    return sub_down_np(sub_down_np(c, rad), err), add_up_np(add_up_np(c, rad), err)
-
-
-def _interval_scale_rows(dlo, dhi, mlo, mhi):
-    """Enclosure of ``diag(d) M`` for interval ``d`` (``(..., k)``) and interval ``M``
-    (``(..., k, n)``): the four end products, each one rounding, moved outward."""
-    dlo = dlo[..., :, None]
-    dhi = dhi[..., :, None]
-    p = np.stack([dlo * mlo, dlo * mhi, dhi * mlo, dhi * mhi])
-    return down_np(p.min(axis=0)), up_np(p.max(axis=0))
 
 
 def enclose_jacobian(mlp: MLP, lo, hi) -> tuple[np.ndarray, np.ndarray]:
     """Sound elementwise enclosure ``(J_lo, J_hi)`` of the Jacobian ``d mlp / dx`` over a box.
 
-    For every ``x`` in ``[lo, hi]``: ``J_lo <= J(x) <= J_hi`` entrywise, shape ``(..., out, in)``.
-    Pre-activation intervals come from :func:`enclose_output`'s propagation; ``s'`` is enclosed
-    over each pre-activation interval; then ``J_{k+1} = diag(s'(a_k)) W_k J_k`` in interval
+    For every ``x`` in ``[lo, hi]``: ``J_lo <= J(x) <= J_hi`` entrywise, shape ``(..., out, in)``;
+    for a piecewise-linear network every element of the Clarke generalized Jacobian at every
+    ``x`` in the box lies in it too (docs/math/nonsmooth.md). Pre-activation intervals come from
+    :func:`enclose_output`'s propagation; ``s'`` is enclosed over each pre-activation interval
+    (:meth:`Activation.slope_range`); then ``J_{k+1} = diag(s'(a_k)) W_k J_k`` in interval
     arithmetic (centre-radius for ``W_k J_k``, four-product rule for the diagonal scaling).
     """
-    lo, hi = _check_box(mlp, lo, hi)
-    acts = [mlp.activation] * (len(mlp.weights) - 1) + [mlp.output_activation]
+    lo, hi = check_box(mlp, lo, hi)
     batch = lo.shape[:-1]
     eye = np.broadcast_to(np.eye(mlp.in_dim), (*batch, mlp.in_dim, mlp.in_dim))
     jlo, jhi = eye.copy(), eye.copy()
     zlo, zhi = lo, hi
-    for k, (w, b, act) in enumerate(zip(mlp.weights, mlp.biases, acts)):
-        alo, ahi = _affine(w, b, zlo, zhi)
-        dlo, dhi = _act_prime_interval(act, alo, ahi)
+    for k, (w, b, act) in enumerate(zip(mlp.weights, mlp.biases, mlp.activations)):
+        alo, ahi = affine_enclosure(w, b, zlo, zhi)
+        dlo, dhi = act.slope_range(alo, ahi)
         if k == 0:
             mlo = np.broadcast_to(w, (*batch, *w.shape))
             mhi = mlo
         else:
-            mlo, mhi = _interval_matmul_point_left(w, jlo, jhi)
-        jlo, jhi = _interval_scale_rows(dlo, dhi, mlo, mhi)
-        zlo, zhi = _act_interval(act, alo, ahi)
+            mlo, mhi = matmul_point_left(w, jlo, jhi)
+        jlo, jhi = scale_rows(dlo, dhi, mlo, mhi)
+        zlo, zhi = act.enclose(alo, ahi)
     return jlo, jhi

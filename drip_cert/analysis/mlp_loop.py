@@ -58,13 +58,14 @@ import numpy as np
 import sympy as sp
 
 from drip_cert.analysis.closed_loop import CONVERSION_ULPS
-from drip_cert.analysis.mlp_bounds import _mid_rad, jacobian_np
+from drip_cert.analysis.mlp_bounds import jacobian_np
 from drip_cert.analysis.mlp_enclosures import enclose_box_and_centre
 from drip_cert.errors import SpecError
 from drip_cert.model.blocks import BlockFunction, block_applications
 from drip_cert.model.mlp import MLP
 from drip_cert.model.system import System
 from drip_cert.numerics.bnb_batch import BatchBnbResult, maximize_batch
+from drip_cert.numerics.interval_np import mid_rad
 from drip_cert.numerics.rounding import (
     add_down_np,
     add_up_np,
@@ -218,7 +219,7 @@ def _contract(T: np.ndarray, T_rad: np.ndarray, lo: np.ndarray, hi: np.ndarray):
     ``2 gamma_{K+2}`` times the float magnitude ``(|m| + rr) (|T| + T_rad)^T`` covers both (Higham
     Thm 3.1), plus an underflow term. Sums rounded outward one at a time.
     """
-    m, rr = _mid_rad(lo, hi)
+    m, rr = mid_rad(lo, hi)
     aT = np.abs(T)
     c = m @ T.T
     am = np.abs(m) + rr
@@ -304,7 +305,7 @@ def box_bounds(
     boxes = np.asarray(boxes, dtype=float)
     lo, hi = boxes[..., 0], boxes[..., 1]
     N, d = lo.shape
-    c, r = _mid_rad(lo, hi)
+    c, r = mid_rad(lo, hi)
     (jc_lo, jc_hi), (hc_lo, hc_hi), (hb_lo, hb_hi) = _combine(dec, lo, hi)
     if objective == "jac_lipschitz":
         H = np.maximum(np.abs(hb_lo), np.abs(hb_hi)).reshape(N, -1, d)
@@ -315,7 +316,7 @@ def box_bounds(
         Hc = (0.5 * (hc_lo + hc_hi)).reshape(N, -1, d)
         val = np.sqrt(np.linalg.eigvalsh(np.swapaxes(np.abs(Hc), -1, -2) @ np.abs(Hc))[:, -1])
         return ub, val, c
-    J0, jrad = _mid_rad(jc_lo, jc_hi)
+    J0, jrad = mid_rad(jc_lo, jc_hi)
     G = 0.5 * (hc_lo + hc_hi)
     D = np.maximum(sub_up_np(hb_hi, G), sub_up_np(G, hb_lo))
     # R = rad[J_c] + sum_l D_l r_l (d non-negative terms: 2 gamma_{d+1} covers the float sum)

@@ -144,7 +144,12 @@ class Block:
     def to_dict(self) -> dict[str, Any]:
         out: dict[str, Any] = {"name": self.name, "inputs": self.in_dim, "outputs": self.out_dim}
         if self.mlp is not None:
-            out.update(kind="mlp", sizes=list(self.mlp.sizes), activation=self.mlp.activation)
+            out.update(
+                kind="mlp",
+                sizes=list(self.mlp.sizes),
+                activation=self.mlp.activation,
+                activations=list(self.mlp.activation_specs),
+            )
         if self.source:
             out["source"] = self.source
         return out
@@ -162,7 +167,7 @@ def load_mlp_block(
     weights: str | Path,
     inputs: int,
     outputs: int,
-    activation: str | None = None,
+    activation: str | list[str] | None = None,
     field: str | None = None,
 ) -> Block:
     """Load an MLP block from ``weights`` (.npz, ``allow_pickle=False``), checking its shape."""

@@ -264,8 +264,14 @@ def spec_from_dict(doc: Mapping[str, Any], path: Path | None = None) -> Spec:
         ins = _posint(bdef["inputs"], f"{fld}.inputs", err)
         outs = _posint(bdef["outputs"], f"{fld}.outputs", err)
         act = bdef.get("activation")
-        if act is not None and not isinstance(act, str):
-            raise err("must be a string", f"{fld}.activation")
+        if act is not None and not (
+            isinstance(act, str) or (isinstance(act, list) and all(isinstance(a, str) for a in act))
+        ):
+            raise err(
+                "must be a name (hidden layers, affine output) or a list of names, one per "
+                'layer with the output layer included, e.g. ["relu", "relu", "identity"]',
+                f"{fld}.activation",
+            )
         try:
             blocks[bname] = load_mlp_block(bname, wpath, ins, outs, act, field=f"{fld}.weights")
         except SpecError as exc:
