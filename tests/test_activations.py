@@ -171,7 +171,10 @@ def test_point_slope_agrees_with_jax_autodiff(spec):
     auto = np.asarray(jax.vmap(jax.grad(lambda x: act.value_jax(x)))(jnp.asarray(z)))
     np.testing.assert_allclose(act.prime_np(z), auto, rtol=AUTODIFF_REL, atol=AUTODIFF_ABS)
     np.testing.assert_allclose(
-        act.value_np(z), np.asarray(act.value_jax(jnp.asarray(z))), rtol=AUTODIFF_REL, atol=AUTODIFF_ABS
+        act.value_np(z),
+        np.asarray(act.value_jax(jnp.asarray(z))),
+        rtol=AUTODIFF_REL,
+        atol=AUTODIFF_ABS,
     )
 
 
