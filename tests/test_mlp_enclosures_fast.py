@@ -195,6 +195,7 @@ def test_dropping_the_outward_rounding_or_flipping_a_sign_is_detected(monkeypatc
         return _contains(lo, hi, vals)
 
     assert second_contained()
+
     def plain_mul(alo, ahi, blo, bhi):  # the four end products, NOT rounded outward
         p = np.stack([alo * blo, alo * bhi, ahi * blo, ahi * bhi])
         return p.min(axis=0), p.max(axis=0)

@@ -4,6 +4,8 @@ or unsupported files are a SpecError naming the node or tensor; export -> import
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 
@@ -21,6 +23,7 @@ FLOAT32_AGREE = 1e-5  # float32 graph vs float64 conversion, O(1) outputs, width
 GELU_REFERENCE = 1e-7  # onnx.reference's Gelu body holds float32 constants, even in float64
 FLOAT64_REFERENCE = 1e-13  # onnx.reference in float64: other summation order and libm calls
 EXACT = 0.0  # float64 export -> import -> evaluate: the same operations on the same numbers
+JAX_ORDER = 1e-14  # the spec evaluates blocks with jax (another summation order, MLP.apply_jax)
 
 
 def _torch_like_onnx(
@@ -339,3 +342,66 @@ def test_spec_block_reads_onnx_with_shapes_from_the_graph_and_cli_exits_2(tmp_pa
     assert main(["certify", str(tmp_path / "st.toml")]) == 2
     err = capsys.readouterr().err
     assert "'2.bias' is missing" in err and "Traceback" not in err
+
+
+LEARNED_SPEC = """
+[system]
+name = "export"
+states = ["x1", "x2"]
+horizon = 1.0
+[blocks.pi_il]
+kind = "mlp"
+weights = "{weights}"
+[dynamics]
+f = ["x2", "-x1"]
+g = [["0"], ["1"]]
+[policy]
+expert = ["-x1 - x2"]
+learned = ["{learned}"]
+[initial]
+support = [[-1.0, 1.0], [-1.0, 1.0]]
+"""
+
+
+def test_export_policy_round_trip_is_exact(tmp_path, capsys):
+    """export-policy writes the learned policy's block; re-importing it gives the same numbers,
+    bit for bit (float64), and the same network as the spec evaluates."""
+    from drip_cert.cli import main
+    from drip_cert.spec.load import load_spec
+
+    mlp = MLP(
+        *_weights((2, 16, 16, 1), seed=15), activations=("relu", "leaky_relu(0.1)", "identity")
+    )
+    mlp.save(tmp_path / "p.npz")
+    spec = tmp_path / "s.toml"
+    spec.write_text(LEARNED_SPEC.format(weights="p.npz", learned="pi_il(x)[0]"))
+    out = tmp_path / "policy.onnx"
+    assert main(["export-policy", str(spec), "--out", str(out), "--json"]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert summary["block_is_policy"] and summary["activations"] == list(mlp.activation_specs)
+    back = read_onnx(out)
+    x = np.random.default_rng(16).normal(size=(100, 2))
+    assert np.max(np.abs(back.apply_np(x) - mlp.apply_np(x))) == EXACT
+    s = load_spec(spec).system
+    xs = x[:5]
+    np.testing.assert_allclose(
+        np.asarray(s.blocks["pi_il"].evaluate_np(xs)),
+        back.apply_np(xs),
+        rtol=JAX_ORDER,
+        atol=JAX_ORDER,
+    )
+    # float32 for a robot runtime; a wrapped policy is flagged
+    spec.write_text(LEARNED_SPEC.format(weights="p.npz", learned="pi_il(x)[0] - 0.5*x1"))
+    assert (
+        main(["export-policy", str(spec), "--out", str(tmp_path / "f.onnx"), "--dtype", "float32"])
+        == 0
+    )
+    assert "wraps the network" in capsys.readouterr().out
+    assert read_onnx(tmp_path / "f.onnx").weights[0].dtype == np.float64
+    spec.write_text(
+        LEARNED_SPEC.format(weights="p.npz", learned="-x1").replace(
+            "[blocks.pi_il]", "[blocks.unused]"
+        )
+    )
+    assert main(["export-policy", str(spec), "--out", str(tmp_path / "g.onnx")]) == 2
+    assert "0 MLP blocks" in capsys.readouterr().err
