@@ -231,23 +231,39 @@ def _contract(T: np.ndarray, T_rad: np.ndarray, lo: np.ndarray, hi: np.ndarray):
 
 
 def _combine(dec: JacobianInBlocks, lo: np.ndarray, hi: np.ndarray):
-    """``[M(c)]`` (``(N, p, q)``), ``[dM/dx(c)]`` and ``[dM/dx(B)]`` (``(N, p, q, d)``) for boxes
-    ``(N, d)``, as ``(lo, hi)`` pairs."""
+    """``[M]`` (``(N, p, q)``), ``[dM/dx(c)]`` and ``[dM/dx(B)]`` (``(N, p, q, d)``) for boxes
+    ``(N, d)``, as ``(lo, hi)`` pairs, and ``[M(c)]`` at the centres (for the estimates).
+
+    A smooth block enters ``[M]`` at the centre and the derivative terms through its Hessian
+    (the mean-value form of the module docstring). A nonsmooth block (relu) has no Hessian: it
+    enters ``[M]`` with the enclosure of its Clarke Jacobian over the WHOLE box and the derivative
+    terms with zero, so ``M(x) in [M]`` for every ``x`` in the box and every element of the
+    generalized Jacobian there (docs/math/nonsmooth.md); the bound is then first order in the box
+    radius.
+    """
     N, d = lo.shape
     p, q = dec.A.shape
     jc_lo = np.broadcast_to(sub_down_np(dec.A, dec.A_rad), (N, p, q))
     jc_hi = np.broadcast_to(add_up_np(dec.A, dec.A_rad), (N, p, q))
+    jv_lo, jv_hi = jc_lo, jc_hi
     hc_lo = hc_hi = hb_lo = hb_hi = np.zeros((N, p, q, d))
     for T, T_rad, mlp in zip(dec.T, dec.T_rad, dec.mlps):
-        box, cen = enclose_box_and_centre(mlp, lo, hi, hessian=True)
-        assert box.hessian is not None and cen.hessian is not None
+        box, cen = enclose_box_and_centre(mlp, lo, hi, hessian=mlp.smooth)
         o = mlp.out_dim
         Tm, Tr = T.reshape(p * q, o * d), T_rad.reshape(p * q, o * d)
-        a_lo, a_hi = _contract(
-            Tm, Tr, cen.jacobian[0].reshape(N, o * d), cen.jacobian[1].reshape(N, o * d)
-        )
-        jc_lo = add_down_np(jc_lo, a_lo.reshape(N, p, q))
-        jc_hi = add_up_np(jc_hi, a_hi.reshape(N, p, q))
+
+        def contract(jac, Tm=Tm, Tr=Tr, o=o):
+            a_lo, a_hi = _contract(Tm, Tr, jac[0].reshape(N, o * d), jac[1].reshape(N, o * d))
+            return a_lo.reshape(N, p, q), a_hi.reshape(N, p, q)
+
+        v_lo, v_hi = contract(cen.jacobian)
+        jv_lo, jv_hi = add_down_np(jv_lo, v_lo), add_up_np(jv_hi, v_hi)
+        if not mlp.smooth:
+            b_lo, b_hi = contract(box.jacobian)
+            jc_lo, jc_hi = add_down_np(jc_lo, b_lo), add_up_np(jc_hi, b_hi)
+            continue
+        jc_lo, jc_hi = add_down_np(jc_lo, v_lo), add_up_np(jc_hi, v_hi)
+        assert box.hessian is not None and cen.hessian is not None
         for (hlo, hhi), which in ((cen.hessian, "c"), (box.hessian, "b")):
             # H[n, o, i, l] -> rows (n, l), columns (o, i)
             flo = np.moveaxis(hlo, -1, 1).reshape(N * d, o * d)
@@ -259,7 +275,7 @@ def _combine(dec: JacobianInBlocks, lo: np.ndarray, hi: np.ndarray):
                 hc_lo, hc_hi = add_down_np(hc_lo, g_lo), add_up_np(hc_hi, g_hi)
             else:
                 hb_lo, hb_hi = add_down_np(hb_lo, g_lo), add_up_np(hb_hi, g_hi)
-    return (jc_lo, jc_hi), (hc_lo, hc_hi), (hb_lo, hb_hi)
+    return (jc_lo, jc_hi), (hc_lo, hc_hi), (hb_lo, hb_hi), (jv_lo, jv_hi)
 
 
 def _embed(L: np.ndarray, R: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -306,7 +322,10 @@ def box_bounds(
     lo, hi = boxes[..., 0], boxes[..., 1]
     N, d = lo.shape
     c, r = mid_rad(lo, hi)
-    (jc_lo, jc_hi), (hc_lo, hc_hi), (hb_lo, hb_hi) = _combine(dec, lo, hi)
+    (jc_lo, jc_hi), (hc_lo, hc_hi), (hb_lo, hb_hi), (jv_lo, jv_hi) = _combine(dec, lo, hi)
+    if objective == "jac_lipschitz" and not all(m.smooth for m in dec.mlps):
+        # a relu block's Jacobian jumps across a kink: no Lipschitz constant exists
+        return np.full(N, np.inf), np.full(N, np.inf), c
     if objective == "jac_lipschitz":
         H = np.maximum(np.abs(hb_lo), np.abs(hb_hi)).reshape(N, -1, d)
         _, gram = matmul_bounds(np.swapaxes(H, -1, -2), H)
@@ -342,11 +361,12 @@ def box_bounds(
         ub = np.asarray(
             sym_lambda_max_upper(L.reshape(N * V, p, q), Rtot.reshape(N * V, p, q))
         ).reshape(N, V)
-        val = np.linalg.eigvalsh(0.5 * (J0 + np.swapaxes(J0, -1, -2)))[:, -1]
+        Jv = 0.5 * (jv_lo + jv_hi)  # M at the centre (an estimate)
+        val = np.linalg.eigvalsh(0.5 * (Jv + np.swapaxes(Jv, -1, -2)))[:, -1]
     else:
         E, F = _embed(L.reshape(N * V, p, q), np.ascontiguousarray(Rtot).reshape(N * V, p, q))
         ub = np.asarray(sym_lambda_max_upper(E, F)).reshape(N, V)
-        val = np.linalg.norm(J0, ord=2, axis=(-2, -1))
+        val = np.linalg.norm(0.5 * (jv_lo + jv_hi), ord=2, axis=(-2, -1))
     return ub.max(axis=1), val, c
 
 

@@ -60,6 +60,21 @@ def _jacobian_lipschitz_of(
 ) -> Quantity | None:
     """The routes of :func:`jacobian_lipschitz` for the policy expressions ``pol`` (``None``
     instead of the sampled estimate when ``estimate`` is False)."""
+    rough = sorted(
+        f"{b} ({', '.join(a.spec for a in mlp.activations if not a.smooth)})"
+        for b, mlp in ((b, s.blocks[b].mlp) for e in pol for b in _block_names(e))
+        if mlp is not None and not mlp.smooth
+    )
+    if rough:
+        return Quantity(
+            name,
+            math.inf,
+            How.SOUND,
+            "DRIP Assumption PolicyRegularity (b)",
+            f"not Lipschitz: the policy's Jacobian jumps across the kinks of the network "
+            f"{rough[0]} (piecewise linear), so no Lipschitz constant exists "
+            "(docs/math/nonsmooth.md)",
+        )
     jump, branch = _kink_branches(pol, s, box)
     if jump is not None:
         return Quantity(
@@ -148,6 +163,12 @@ def _jacobian_lipschitz_of(
         "sampled sup ||d^2 pi||_F on the support box enlarged by 1 (4096 points, "
         "seed 0): an estimate, not a bound",
     )
+
+
+def _block_names(e: sp.Expr) -> set[str]:
+    from drip_cert.model.blocks import block_applications
+
+    return {a.block_name for a in block_applications(e)}
 
 
 def _kinks(pol: sp.Matrix, s: System) -> list[sp.Expr]:
