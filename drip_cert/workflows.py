@@ -30,6 +30,7 @@ import numpy as np
 
 from drip_cert.errors import SpecError
 from drip_cert.figures_l1 import l1_front_figure
+from drip_cert.model.blocks import BlockFunction, block_applications
 from drip_cert.model.onnx_io import write_onnx
 from drip_cert.numerics.atomic_io import atomic_write_json, atomic_write_text, jsonable
 from drip_cert.numerics.user_files import output_dir, output_file
@@ -395,8 +396,6 @@ def export_policy(
     part ``K x``, a scaling), the summary's ``learned`` shows the whole expression and
     ``block_is_policy`` is False. ``dtype``: ``"float64"`` (exact) or ``"float32"``.
     """
-    from drip_cert.model.blocks import BlockFunction, block_applications
-
     sp_ = as_spec(spec)
     s = sp_.system
     if s.learned is None:

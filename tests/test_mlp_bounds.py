@@ -1,4 +1,4 @@
-"""Tests of drip_cert.analysis.mlp_bounds: activation constants, Lipschitz and Jacobian-Lipschitz
+"""Tests of drip_cert.analysis.mlp: activation constants, Lipschitz and Jacobian-Lipschitz
 bounds of MLPs (DRIP Assumption PolicyRegularity), LipSDP, interval enclosures."""
 
 from __future__ import annotations
@@ -12,7 +12,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from drip_cert._jax import jax, jnp
-from drip_cert.analysis.mlp_bounds import (
+from drip_cert.analysis.mlp import (
     activation_bounds,
     enclose_activation,
     enclose_activation_prime,

@@ -37,7 +37,7 @@ import sympy as sp
 
 from drip_cert.analysis.constants import batch_fn
 from drip_cert.analysis.growth import growth_bound, sup_bound
-from drip_cert.analysis.mlp_bounds import enclose_output, lipschitz_bound
+from drip_cert.analysis.mlp import enclose_output, lipschitz_bound
 from drip_cert.model.activations import Identity
 from drip_cert.model.blocks import block_applications
 from drip_cert.model.mlp import MLP

@@ -13,7 +13,7 @@ with constant ``A`` and ``T_k``. The closed-loop Jacobian of the paper's example
 
 Bound on one box ``B = [c - r, c + r]`` (:func:`box_bounds`). Let ``[J_c]`` enclose ``M(c)``,
 ``[H_B]`` enclose the derivative ``dM/dx_l`` over ``B`` (both from the MLP enclosures of
-:mod:`drip_cert.analysis.mlp_enclosures`, contracted with ``T_k``), ``J0`` the float midpoint of
+:mod:`drip_cert.analysis.mlp.derivatives`, contracted with ``T_k``), ``J0`` the float midpoint of
 ``[J_c]`` and ``G_l`` the float midpoint of the enclosure of ``dM/dx_l(c)``. By the mean value
 theorem applied to each entry,
 
@@ -58,8 +58,8 @@ import numpy as np
 import sympy as sp
 
 from drip_cert.analysis.closed_loop import CONVERSION_ULPS
-from drip_cert.analysis.mlp_bounds import jacobian_np
-from drip_cert.analysis.mlp_enclosures import enclose_box_and_centre
+from drip_cert.analysis.mlp import jacobian_np
+from drip_cert.analysis.mlp.derivatives import enclose_box_and_centre
 from drip_cert.errors import SpecError
 from drip_cert.model.blocks import BlockFunction, block_applications
 from drip_cert.model.mlp import MLP

@@ -8,6 +8,8 @@ from pathlib import Path
 
 from drip_cert.errors import SpecError
 from drip_cert.model.mlp import MLP, load_mlp
+from drip_cert.model.onnx_io import read_onnx
+from drip_cert.model.safetensors_io import read_safetensors
 
 __all__ = ["NETWORK_FORMATS", "load_network"]
 
@@ -35,12 +37,8 @@ def load_network(
                 f"{str(path)!r}: an ONNX graph defines its own activations; remove 'activation'",
                 field=field,
             )
-        from drip_cert.model.onnx_io import read_onnx
-
         return read_onnx(path, expect_in, expect_out, field=field)
     if suffix == ".safetensors":
-        from drip_cert.model.safetensors_io import read_safetensors
-
         return read_safetensors(path, activation, expect_in, expect_out, field=field)
     if suffix == ".npz":
         return load_mlp(

@@ -40,6 +40,9 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import onnx
+from onnx import TensorProto, helper, numpy_helper
+from onnx.reference import ReferenceEvaluator
 
 from drip_cert.errors import SpecError
 from drip_cert.model.activations import (
@@ -124,8 +127,6 @@ def _vector(c: np.ndarray, n: int, what: str, path: Path, fld: str | None) -> np
 
 
 def _float_array(t, path: Path, fld: str | None) -> np.ndarray:
-    from onnx import numpy_helper  # onnx: keep off the CLI start-up path
-
     a = numpy_helper.to_array(t)
     if not np.issubdtype(a.dtype, np.floating):
         raise _err(path, f"tensor {t.name!r} has dtype {a.dtype}; only float tensors", fld)
@@ -136,8 +137,6 @@ def _float_array(t, path: Path, fld: str | None) -> np.ndarray:
 
 
 def _attrs(node) -> dict[str, Any]:
-    from onnx import helper  # onnx: keep off the CLI start-up path
-
     out = {}
     for a in node.attribute:
         v = helper.get_attribute_value(a)
@@ -185,8 +184,6 @@ def read_onnx(
     ``onnx.reference`` (:func:`check_against_reference`). Every problem is a
     :class:`~drip_cert.errors.SpecError` naming the file (exit status 2).
     """
-    import onnx  # onnx: keep off the CLI start-up path
-
     p = input_file(path, "ONNX file", field=field)
     with reading(p, "ONNX file"):
         try:
@@ -235,8 +232,6 @@ def _convert(model, path: Path, fld: str | None) -> MLP:
         if op == "Constant":
             if "value" not in attrs:
                 raise _err(path, f"{where}: only tensor constants ('value') are supported", fld)
-            from onnx import numpy_helper  # onnx: keep off the CLI start-up path
-
             arr = numpy_helper.to_array(attrs["value"])
             if not np.issubdtype(arr.dtype, np.floating):
                 raise _err(path, f"{where}: constant of dtype {arr.dtype}; only floats", fld)
@@ -364,9 +359,6 @@ def check_against_reference(model, mlp: MLP, path: Path, fld: str | None = None)
     """The largest difference between ``mlp`` and ``onnx.reference`` on ``N_CHECK`` seeded
     standard-normal inputs; a :class:`SpecError` when above the tolerance of the module
     docstring."""
-    from onnx import helper
-    from onnx.reference import ReferenceEvaluator
-
     inp = [i for i in model.graph.input if i.name not in {t.name for t in model.graph.initializer}]
     elem = inp[0].type.tensor_type.elem_type
     dtype = np.dtype(helper.tensor_dtype_to_np_dtype(elem))
@@ -411,9 +403,6 @@ def write_onnx(mlp: MLP, path: str | Path, dtype: str = "float64") -> Path:
     ``dtype``: ``"float64"`` (the round trip through :func:`read_onnx` is exact) or
     ``"float32"``.
     """
-    import onnx
-    from onnx import TensorProto, helper, numpy_helper
-
     if dtype not in ("float64", "float32"):
         raise SpecError(f"dtype must be 'float64' or 'float32', got {dtype!r}", field="dtype")
     np_t = np.float64 if dtype == "float64" else np.float32

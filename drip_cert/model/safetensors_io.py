@@ -23,6 +23,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
+from safetensors.numpy import load_file, save_file
 
 from drip_cert.errors import SpecError
 from drip_cert.model.mlp import MLP, layer_activations
@@ -46,8 +47,6 @@ def read_safetensors(
     field: str | None = None,
 ) -> MLP:
     """Read the network ``path`` (see the module docstring) with the given activations."""
-    from safetensors.numpy import load_file  # safetensors: keep off the CLI start-up path
-
     p = input_file(path, "safetensors file", field=field)
     with reading(p, "safetensors file"):
         try:
@@ -131,8 +130,6 @@ def read_safetensors(
 def write_safetensors(mlp: MLP, path: str | Path, layout: str = "torch") -> Path:
     """Write ``mlp``'s parameters in the PyTorch ``nn.Sequential`` layout (``Linear`` at even
     indices) or the Flax ``Dense_i`` layout (``layout="flax"``)."""
-    from safetensors.numpy import save_file
-
     out: dict[str, np.ndarray] = {}
     for k, (w, b) in enumerate(zip(mlp.weights, mlp.biases)):
         if layout == "torch":

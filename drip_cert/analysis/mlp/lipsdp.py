@@ -1,81 +1,33 @@
-"""Regularity bounds of MLP policies: Lipschitz constants, Jacobian-Lipschitz constants, enclosures.
+"""Lipschitz bounds of an MLP by LipSDP-Neuron (Fazlyab et al. 2019), re-checked rigorously, and
+:func:`lipschitz_bound`, the best sound Lipschitz constant (the smaller of LipSDP and the layer
+product of :mod:`drip_cert.analysis.mlp.lipschitz`).
 
-These are the constants of the DRIP paper's Assumption "PolicyRegularity"
-(``assmp:PolicyRegularity``): ``L_pi`` bounds the Lipschitz constant of a policy and ``L_dpi`` the
-Lipschitz constant of its Jacobian (equivalently, the second-order Taylor remainder
-``||pi(z) - pi(z0) - dpi(z0)(z - z0)|| <= L_dpi/2 ||z - z0||^2``). For the TaSIL certificate
-(docs/math/tasil.md section 3.1, assumption A2) ``L_Delta <= L_dpi(pi_hat) + L_dpi(pi_star)``.
-
-Network convention (:class:`drip_cert.model.mlp.MLP`): ``z_0 = x``, ``a_k = W_k z_k + b_k``,
-``z_{k+1} = s_k(a_k)`` where ``s_k`` is the hidden activation for ``k < L-1`` and the output
-activation (identity when ``None``) for ``k = L-1``. All norms are Euclidean / spectral.
-
-Activation constants: each activation class of :mod:`drip_cert.model.activations` proves its
-slope range and curvature bound (:attr:`~drip_cert.model.activations.Activation.bounds`).
-
-Floating-point soundness (:mod:`drip_cert.numerics.rounding` owns the rules): the activation
-constants are
-evaluated in Arb; spectral norms are rigorous upper bounds
-(:func:`~drip_cert.numerics.rounding.spectral_norm_upper`), every product and sum of the Lipschitz
-recursions is rounded up, and the LipSDP certificate is re-checked with a rigorous upper bound of
-the largest eigenvalue of the LMI matrix (its float assembly error bounded entrywise). The
-interval enclosures use directed rounding for every arithmetic operation and the
-cancellation-free forms ``tanh' = sech^2 = 4 e^{-2|z|} / (1 + e^{-2|z|})^2`` and
-``GELU = z Phi(z)``, ``GELU' = Phi(z) + z phi(z)`` with ``Phi`` from ``ndtr`` (``erfc`` in the
-left tail) -- never ``1 - tanh^2`` or ``1 + erf``, which cancel to 0 for large ``|z|`` (then the
-exact value lies outside any relative pad). They evaluate ``exp``, ``tanh`` and ``ndtr`` in
-float (vectorised over boxes and neurons) and widen each result by the documented error budget of
-those library functions (:data:`~drip_cert.numerics.rounding.LIBM_REL`,
-:func:`~drip_cert.numerics.rounding.ndtr_rel_budget`, checked against mpmath in
-``tests/test_rounding.py``):
-sound as long as numpy and scipy meet their documented accuracy.
+The LipSDP certificate is re-checked with a rigorous upper bound of the largest eigenvalue of
+the LMI matrix (its float assembly error bounded entrywise); the solver's float is never used
+as a bound.
 """
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
 
+from drip_cert.analysis.mlp.lipschitz import lipschitz_product, spectral_norm_up
 from drip_cert.errors import SpecError
-from drip_cert.model.activations import Activation, ActivationBounds, get_activation
 from drip_cert.model.mlp import MLP
-from drip_cert.numerics.interval_np import (
-    affine_enclosure,
-    matmul_point_left,
-    scale_rows,
-)
 from drip_cert.numerics.rounding import (
-    add_up,
     add_up_np,
     gamma,
     mul_up,
-    norm2_up_np,
-    spectral_norm_upper,
     sqrt_up,
     sym_lambda_max_upper,
     up_np,
 )
 from drip_cert.provenance import Check, How, Quantity
 
-__all__ = [
-    "ActivationBounds",
-    "LipSDPResult",
-    "activation_bounds",
-    "check_box",
-    "enclose_activation",
-    "enclose_activation_prime",
-    "enclose_jacobian",
-    "enclose_output",
-    "jacobian_lipschitz_bound",
-    "jacobian_np",
-    "lipschitz_bound",
-    "lipschitz_lipsdp",
-    "lipschitz_product",
-]
+__all__ = ["LipSDPResult", "lipschitz_bound", "lipschitz_lipsdp"]
 
-_EPS = float(np.finfo(np.float64).eps)
 _TINY = 2.0**-1074  # smallest subnormal: the absolute unit of underflow errors
 # LMI size up to which "auto" uses Clarabel (interior point, ~1 s or less there)
 _CLARABEL_MAX_DIM = 48
@@ -84,67 +36,6 @@ _CLARABEL_MAX_DIM = 48
 # (the rigorous re-check alone decides whether the certificate holds)
 _RHO_MARGIN_REL = 1e-7
 _RHO_MARGIN_ABS = 1e-12
-
-
-def activation_bounds(name: str | Activation | None) -> ActivationBounds:
-    """Global slope range and curvature bound of an activation (``None``: identity); the proofs
-    are in the classes of :mod:`drip_cert.model.activations`."""
-    return get_activation(name).bounds
-
-
-def enclose_activation(name: str | Activation | None, lo, hi) -> tuple[np.ndarray, np.ndarray]:
-    """Sound enclosure of the activation over ``[lo, hi]`` (:meth:`Activation.enclose`)."""
-    return get_activation(name).enclose(lo, hi)
-
-
-def enclose_activation_prime(
-    name: str | Activation | None, lo, hi
-) -> tuple[np.ndarray, np.ndarray]:
-    """Sound enclosure of the (Clarke) slopes over ``[lo, hi]``
-    (:meth:`Activation.slope_range`)."""
-    return get_activation(name).slope_range(lo, hi)
-
-
-def _layer_activations(mlp: MLP) -> list[ActivationBounds]:
-    """Activation bounds of each layer ``k = 0..L-1`` (the last is the output activation)."""
-    return [a.bounds for a in mlp.activations]
-
-
-def _spec_norm(w: np.ndarray) -> float:
-    """Rigorous upper bound of ``||W||_2``
-    (:func:`~drip_cert.numerics.rounding.spectral_norm_upper`)."""
-    return float(spectral_norm_upper(w))
-
-
-def _row_norm(w: np.ndarray) -> float:
-    """``||W||_{2 -> inf}`` = the largest row 2-norm, rounded up."""
-    return float(np.max(norm2_up_np(w, axis=1)))
-
-
-# --------------------------------------------------------------------------- Lipschitz bounds
-
-
-def lipschitz_product(mlp: MLP) -> Quantity:
-    """Product bound ``L_pi <= prod_k sup|s_k'| ||W_k||_2`` (DRIP Assumption PolicyRegularity a).
-
-    Sound by the chain rule: ``||J(x)|| <= prod_k ||diag(s_k'(a_k))|| ||W_k||``.
-
-    Returns
-    -------
-    Quantity
-        ``L_pi``, :attr:`How.SOUND`.
-    """
-    value = 1.0
-    for w, act in zip(mlp.weights, _layer_activations(mlp)):
-        value = mul_up(value, mul_up(act.abs_slope, _spec_norm(w)))
-    return Quantity(
-        "L_pi",
-        value,
-        How.SOUND,
-        "DRIP Assumption PolicyRegularity (a)",
-        f"product of spectral norms times sup|s'| ({', '.join(mlp.activation_specs)}), "
-        "global on R^n",
-    )
 
 
 @dataclass(frozen=True)
@@ -311,7 +202,7 @@ def lipschitz_lipsdp(
             f"LMI size {d} exceeds max_dim={max_dim}; raise max_dim or use solver='SCS'",
         )
         return LipSDPResult(None, "too_large", chk, product)
-    scale = max(1.0, _spec_norm(ws[-1]) ** 2)
+    scale = max(1.0, spectral_norm_up(ws[-1]) ** 2)
     lam = cp.Variable(N, nonneg=True)
     rho = cp.Variable(nonneg=True)
     A, B = _lipsdp_blocks(mlp)
@@ -395,133 +286,3 @@ def lipschitz_bound(mlp: MLP, method: str = "product") -> Quantity:
     else:
         note = f"LipSDP-Neuron re-checked (margin {res.check.margin:.2e}); min with product bound"
     return Quantity("L_pi", res.best, How.SOUND, "DRIP Assumption PolicyRegularity (a)", note)
-
-
-def jacobian_lipschitz_bound(mlp: MLP) -> Quantity:
-    """Sound Lipschitz constant ``L_dpi`` of the Jacobian (operator norm), DRIP Assumption
-    PolicyRegularity (b).
-
-    Derivation. With ``J_{k+1}(x) = D_k(x) W_k J_k(x)``, ``D_k = diag(s_k'(a_k(x)))``, ``J_0 = I``,
-    let ``P_k >= sup ||J_k||`` and ``Q_k >= Lip(J_k)``. For any ``x, y``,
-
-    ``J_{k+1}(x) - J_{k+1}(y) = (D_k(x) - D_k(y)) W_k J_k(x) + D_k(y) W_k (J_k(x) - J_k(y))``.
-
-    ``||D_k(x) - D_k(y)||_op = max_i |s'(a_i(x)) - s'(a_i(y))| <= sup|s''| ||a_k(x) - a_k(y)||_inf``
-    and ``||a_k(x) - a_k(y)||_inf <= ||W_k||_{2->inf} P_k ||x - y||`` (largest row norm), so
-
-    ``P_{k+1} = sup|s_k'| ||W_k|| P_k``,
-    ``Q_{k+1} = sup|s_k''| ||W_k||_{2->inf} ||W_k|| P_k^2 + sup|s_k'| ||W_k|| Q_k``,
-    ``P_0 = 1``, ``Q_0 = 0``, and ``L_dpi = Q_L``. For one hidden layer and an affine output this
-    is ``||W_1|| sup|s''| ||W_0||_{2->inf} ||W_0||  <=  ||W_1|| sup|s''| ||W_0||^2``, with
-    ``sup|tanh''| = 4/(3 sqrt 3)`` and ``sup|GELU''| = sqrt(2/pi)`` (:func:`activation_bounds`).
-
-    Returns
-    -------
-    Quantity
-        ``L_dpi``, :attr:`How.SOUND`, global on R^n.
-    """
-    if not mlp.smooth:
-        rough = [a.spec for a in mlp.activations if not a.smooth]
-        return Quantity(
-            "L_dpi",
-            math.inf,
-            How.SOUND,
-            "DRIP Assumption PolicyRegularity (b)",
-            f"not Lipschitz: the activation {rough[0]} has a discontinuous slope",
-        )
-    P, Q = 1.0, 0.0
-    for w, act in zip(mlp.weights, _layer_activations(mlp)):
-        nw = _spec_norm(w)
-        # every factor is >= 0, so rounding each product and sum up bounds the recursion
-        curv_term = mul_up(mul_up(mul_up(act.abs_curv, _row_norm(w)), nw), mul_up(P, P))
-        Q = add_up(curv_term, mul_up(mul_up(act.abs_slope, nw), Q))
-        P = mul_up(mul_up(act.abs_slope, nw), P)
-    return Quantity(
-        "L_dpi",
-        Q,
-        How.SOUND,
-        "DRIP Assumption PolicyRegularity (b)",
-        "layerwise product rule: Q' = sup|s''| ||W||_2->inf ||W|| P^2 + sup|s'| ||W|| Q",
-    )
-
-
-def jacobian_np(mlp: MLP, x: np.ndarray) -> np.ndarray:
-    """Forward-mode Jacobian of ``mlp`` at ``x`` (``(..., in)``), shape ``(..., out, in)`` (float;
-    at a kink of a piecewise-linear activation, one element of the Clarke Jacobian)."""
-    x = np.asarray(x, dtype=np.float64)
-    z = x
-    J = np.broadcast_to(np.eye(mlp.in_dim), (*x.shape[:-1], mlp.in_dim, mlp.in_dim))
-    for w, bias, act in zip(mlp.weights, mlp.biases, mlp.activations):
-        a = z @ w.T + bias
-        J = act.prime_np(a)[..., :, None] * (w @ J)
-        z = act.value_np(a)
-    return J
-
-
-# --------------------------------------------------------------------------- interval enclosures
-
-
-def check_box(mlp: MLP, lo, hi) -> tuple[np.ndarray, np.ndarray]:
-    """``(lo, hi)`` as float arrays of shape ``(..., in_dim)``, finite, ``lo <= hi``; else a
-    :class:`~drip_cert.errors.SpecError` saying which entry is wrong."""
-    lo = np.asarray(lo, dtype=np.float64)
-    hi = np.asarray(hi, dtype=np.float64)
-    if lo.shape != hi.shape or lo.shape[-1:] != (mlp.in_dim,):
-        raise SpecError(
-            f"box bounds must both have shape (..., {mlp.in_dim}), got {lo.shape} and {hi.shape}",
-            field="box",
-        )
-    if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi))):
-        raise SpecError("box bounds must be finite", field="box")
-    if np.any(lo > hi):
-        i = np.argwhere(lo > hi)[0]
-        raise SpecError(
-            f"box lower bound exceeds upper bound at index {tuple(i)}: "
-            f"{lo[tuple(i)]} > {hi[tuple(i)]}; swap them",
-            field="box",
-        )
-    return lo, hi
-
-
-def enclose_output(mlp: MLP, lo, hi) -> tuple[np.ndarray, np.ndarray]:
-    """Interval bound propagation: ``(y_lo, y_hi)`` with ``y_lo <= mlp(x) <= y_hi`` for every
-    ``x`` in the box ``[lo, hi]``.
-
-    ``lo``, ``hi`` have shape ``(..., in)`` (a batch of boxes is enclosed at once); the result has
-    shape ``(..., out)``. Affine layers use the centre-radius form with a rigorous rounding term
-    (:func:`~drip_cert.numerics.interval_np.affine_enclosure`); each activation encloses its
-    values over the pre-activation interval (:meth:`Activation.enclose`).
-    """
-    lo, hi = check_box(mlp, lo, hi)
-    for w, b, act in zip(mlp.weights, mlp.biases, mlp.activations):
-        lo, hi = affine_enclosure(w, b, lo, hi)
-        lo, hi = act.enclose(lo, hi)
-    return lo, hi
-
-
-def enclose_jacobian(mlp: MLP, lo, hi) -> tuple[np.ndarray, np.ndarray]:
-    """Sound elementwise enclosure ``(J_lo, J_hi)`` of the Jacobian ``d mlp / dx`` over a box.
-
-    For every ``x`` in ``[lo, hi]``: ``J_lo <= J(x) <= J_hi`` entrywise, shape ``(..., out, in)``;
-    for a piecewise-linear network every element of the Clarke generalized Jacobian at every
-    ``x`` in the box lies in it too (docs/math/nonsmooth.md). Pre-activation intervals come from
-    :func:`enclose_output`'s propagation; ``s'`` is enclosed over each pre-activation interval
-    (:meth:`Activation.slope_range`); then ``J_{k+1} = diag(s'(a_k)) W_k J_k`` in interval
-    arithmetic (centre-radius for ``W_k J_k``, four-product rule for the diagonal scaling).
-    """
-    lo, hi = check_box(mlp, lo, hi)
-    batch = lo.shape[:-1]
-    eye = np.broadcast_to(np.eye(mlp.in_dim), (*batch, mlp.in_dim, mlp.in_dim))
-    jlo, jhi = eye.copy(), eye.copy()
-    zlo, zhi = lo, hi
-    for k, (w, b, act) in enumerate(zip(mlp.weights, mlp.biases, mlp.activations)):
-        alo, ahi = affine_enclosure(w, b, zlo, zhi)
-        dlo, dhi = act.slope_range(alo, ahi)
-        if k == 0:
-            mlo = np.broadcast_to(w, (*batch, *w.shape))
-            mhi = mlo
-        else:
-            mlo, mhi = matmul_point_left(w, jlo, jhi)
-        jlo, jhi = scale_rows(dlo, dhi, mlo, mhi)
-        zlo, zhi = act.enclose(alo, ahi)
-    return jlo, jhi

@@ -7,19 +7,20 @@
 * its Hessian ``T_k = d^2 z_k / dx^2`` (``(N, n_k, in, in)``, optional),
 
 through ``a_k = W_k z_k + b_k``, ``z_{k+1} = s_k(a_k)`` (the convention of
-:mod:`drip_cert.analysis.mlp_bounds`) by the forward-mode chain rule in interval arithmetic:
+:mod:`drip_cert.analysis.mlp.enclosures`) by the forward-mode chain rule in interval arithmetic:
 
 ``J_a = W J_z``, ``T_a = W T_z``,
 ``J_{k+1} = diag(s'(a)) J_a``,
 ``T_{k+1}[m, i, l] = s''(a_m) J_a[m, i] J_a[m, l] + s'(a_m) T_a[m, i, l]``.
 
 Every product of a point matrix with an interval array uses the centre-radius form with the
-rounding term of Higham's Thm 3.1 (``mlp_bounds._interval_matmul_point_left``), every product of
+rounding term of Higham's Thm 3.1
+(:func:`~drip_cert.numerics.interval_np.matmul_point_left`), every product of
 two intervals the four end products rounded outward, and the activation and its first two
 derivatives are enclosed over each pre-activation interval from their monotone pieces
 (:func:`enclose_activation_second` for ``s''``), with the library-function error budgets of
 :mod:`drip_cert.numerics.rounding` (sound as long as numpy meets its documented accuracy, as for
-the rest of :mod:`~drip_cert.analysis.mlp_bounds`).
+the rest of :mod:`drip_cert.analysis.mlp`).
 
 **Centred (mean-value) pre-activations.** With ``centred=True`` the centre ``c`` of each box is
 propagated with the box (the batch doubles) and every pre-activation enclosure is intersected
@@ -39,7 +40,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from drip_cert.analysis.mlp_bounds import check_box
+from drip_cert.analysis.mlp.enclosures import check_box
 from drip_cert.errors import SpecError
 from drip_cert.model.activations import Identity, get_activation
 from drip_cert.model.mlp import MLP
@@ -177,7 +178,8 @@ def enclose_box_and_centre(
     mlp: MLP, lo: np.ndarray, hi: np.ndarray, *, hessian: bool = True
 ) -> tuple[DerivativeEnclosure, DerivativeEnclosure]:
     """Centred enclosures over the boxes ``(N, in)`` and enclosures at their centres
-    (``mlp_bounds._mid_rad``), from one propagation (the centres ride along with the boxes)."""
+    (:func:`~drip_cert.numerics.interval_np.mid_rad`), from one propagation (the centres ride
+    along with the boxes)."""
     lo, hi = check_box(mlp, lo, hi)
     box, centre = _propagate(mlp, lo, hi, hessian, True)
     assert centre is not None
