@@ -2,8 +2,8 @@
 
 1. Jacobian enclosures of the paper's trained policy (``demo_out/policy_tasil.npz``, a tanh MLP
    4-64-64-4) over random boxes of radius 0.5, 0.1, 0.02 in ``[-1, 1]^4``: mean width of the
-   plain interval route (``mlp_bounds.enclose_jacobian``) and of the centred route
-   (``mlp_enclosures.enclose_jacobian_centred``), their ratio, and the time per box.
+   plain interval route (``analysis.mlp.enclose_jacobian``) and of the centred route
+   (``analysis.mlp.enclose_jacobian_centred``), their ratio, and the time per box.
 2. ``max mu_2`` of the paper's learned closed loop ``J = -0.05 I - 0.25 Dh + 0.25 D pi_IL`` on
    ``[-1, 1]^4``: the sound bound reached in ``--time`` seconds by the existing
    ``interval-bnb`` and by ``mlp-bnb`` (same sampled maximum).
@@ -24,8 +24,8 @@ import numpy as np
 
 from drip_cert.analysis.block_enclosure import block_enclose_callback
 from drip_cert.analysis.contraction import SamplingOptions, contraction_rate
-from drip_cert.analysis.mlp_bounds import enclose_jacobian
-from drip_cert.analysis.mlp_enclosures import enclose_jacobian_centred
+from drip_cert.analysis.mlp import enclose_jacobian
+from drip_cert.analysis.mlp.derivatives import enclose_jacobian_centred
 from drip_cert.analysis.mlp_loop import sup_difference_jacobian_norm, system_mlps
 from drip_cert.learn.imitation import learned_system
 from drip_cert.model.mlp import load_mlp

@@ -32,7 +32,13 @@ from drip_cert.numerics.user_files import input_file, output_dir, output_file
 from drip_cert.report import certificate_markdown, l1_design_text, train_text, validation_text
 from drip_cert.sim.backend import Backend
 from drip_cert.spec import load_spec
-from drip_cert.workflows import reproduce, train_from_spec, validate_recorded, validate_spec
+from drip_cert.workflows import (
+    export_policy,
+    reproduce,
+    train_from_spec,
+    validate_recorded,
+    validate_spec,
+)
 
 
 def _print_json(obj: Any) -> None:
@@ -117,6 +123,20 @@ def cmd_train(args: argparse.Namespace) -> int:
     for why in summary["failures"]:
         print(f"drip-cert: training failed: {why}", file=sys.stderr)
     return 0 if summary["ok"] else 1
+
+
+def cmd_export_policy(args: argparse.Namespace) -> int:
+    summary = export_policy(args.spec, args.out, dtype=args.dtype, block=args.block)
+    if args.json:
+        _print_json(summary)
+    else:
+        print(
+            f"wrote {summary['out']}: block {summary['block']!r}, sizes {summary['sizes']}, "
+            f"activations {', '.join(summary['activations'])}, {summary['dtype']}"
+        )
+        if not summary["block_is_policy"]:
+            print(f"  note: policy.learned = {summary['learned']} wraps the network")
+    return 0
 
 
 def cmd_validate(args: argparse.Namespace) -> int:
@@ -259,6 +279,16 @@ def build_parser() -> argparse.ArgumentParser:
         func=cmd_train,
         files=[("spec", IN, "specification file"), ("out", OUT_DIR, "--out directory")],
     )
+
+    q = sub.add_parser(
+        "export-policy", help="write the learned policy's network as ONNX (docs/networks.md)"
+    )
+    q.add_argument("spec")
+    q.add_argument("--out", default="policy.onnx", help="the .onnx file to write")
+    q.add_argument("--dtype", choices=["float64", "float32"], default="float64")
+    q.add_argument("--block", default=None, help="the MLP block (default: the learned policy's)")
+    q.add_argument("--json", action="store_true")
+    q.set_defaults(func=cmd_export_policy, files=[("spec", IN, "specification file")])
 
     q = sub.add_parser("validate", help="check a certificate against Monte-Carlo simulation")
     q.add_argument("spec")

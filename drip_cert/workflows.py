@@ -30,8 +30,10 @@ import numpy as np
 
 from drip_cert.errors import SpecError
 from drip_cert.figures_l1 import l1_front_figure
+from drip_cert.model.blocks import BlockFunction, block_applications
+from drip_cert.model.onnx_io import write_onnx
 from drip_cert.numerics.atomic_io import atomic_write_json, atomic_write_text, jsonable
-from drip_cert.numerics.user_files import output_dir
+from drip_cert.numerics.user_files import output_dir, output_file
 from drip_cert.progress import Stages
 from drip_cert.report import (
     certificate_markdown,
@@ -326,6 +328,7 @@ def train_from_spec(
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     tp.mlp.save(out / "policy.npz")
+    write_onnx(tp.mlp, out / "policy.onnx")  # the same network for PyTorch / ONNX Runtime / C++
     save_demonstrations(tp.train, out / "demonstrations.npz")
     failures = _training_failures(tp, gaps, spec, max_heldout_gap)
     binding = rounds[-1]["binding"]
@@ -360,6 +363,7 @@ def train_from_spec(
         "ok": not failures,
         "failures": failures,
         "policy": str(out / "policy.npz"),
+        "policy_onnx": str(out / "policy.onnx"),
         "use_in_spec": (
             '[blocks.pi_il]\nkind = "mlp"\nweights = "policy.npz"\n'
             f"inputs = {s.n}\noutputs = {s.m}\n\n[policy]\nlearned = ["
@@ -380,6 +384,53 @@ GAP_THRESHOLD_NOTE = (
 
 #: checks whose failure more or longer training can change
 _TRAINABLE = ("TaSIL", "L1DRAC-A2", "L1DRAC-A7", "L1DRAC-design")
+
+
+def export_policy(
+    spec: SpecSource, out: str | Path, *, dtype: str = "float64", block: str | None = None
+) -> dict[str, Any]:
+    """Write the learned policy's MLP block of ``spec`` as ONNX (``drip-cert export-policy``).
+
+    ``block`` names the block; by default the one MLP block that ``policy.learned`` applies.
+    The file holds that network only: when ``policy.learned`` adds terms around it (a linear
+    part ``K x``, a scaling), the summary's ``learned`` shows the whole expression and
+    ``block_is_policy`` is False. ``dtype``: ``"float64"`` (exact) or ``"float32"``.
+    """
+    sp_ = as_spec(spec)
+    s = sp_.system
+    if s.learned is None:
+        raise SpecError("the spec has no learned policy to export", field="policy.learned")
+    used = sorted({a.block_name for e in s.learned for a in block_applications(e)})
+    mlps = [b for b in used if s.blocks[b].mlp is not None]
+    if block is None:
+        if len(mlps) != 1:
+            raise SpecError(
+                f"policy.learned applies {len(mlps)} MLP blocks ({mlps}); name one with --block",
+                field="policy.learned",
+            )
+        block = mlps[0]
+    if block not in s.blocks or s.blocks[block].mlp is None:
+        names = sorted(b for b, v in s.blocks.items() if v.mlp is not None)
+        raise SpecError(f"--block {block!r} is not an MLP block of the spec; MLP blocks: {names}")
+    mlp = s.blocks[block].mlp
+    assert mlp is not None
+    path = write_onnx(mlp, output_file(out, "--out file"), dtype=dtype)
+    direct = all(
+        isinstance(e, BlockFunction)
+        and e.block_name == block
+        and e.out_index == i
+        and tuple(e.args) == tuple(s.states)
+        for i, e in enumerate(s.learned)
+    )
+    return {
+        "out": str(path),
+        "block": block,
+        "dtype": dtype,
+        "sizes": list(mlp.sizes),
+        "activations": list(mlp.activation_specs),
+        "learned": [str(e) for e in s.learned],
+        "block_is_policy": direct,
+    }
 
 
 def _binding(cert: Certificate) -> dict[str, Any]:

@@ -178,6 +178,13 @@ def test_residual_training_respects_the_budget_and_is_certified_globally(tmp_pat
     summary = json.loads(stdout)
     assert code == 0, summary["failures"]
     net = load_mlp(out / "policy.npz")
+    # train writes the same network as ONNX beside the npz (float64: exact)
+    from drip_cert.model.onnx_io import read_onnx
+
+    onnx_net = read_onnx(out / "policy.onnx")
+    assert summary["policy_onnx"] == str(out / "policy.onnx")
+    for a, b in zip(net.weights + net.biases, onnx_net.weights + onnx_net.biases):
+        np.testing.assert_array_equal(a, b)
     prod = np.prod([np.linalg.norm(w, 2) for w in net.weights])
     assert prod <= 0.05 * (1 + 1e-9)  # the projection keeps the product within the budget
     K = np.asarray(summary["linear"])

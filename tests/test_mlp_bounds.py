@@ -1,4 +1,4 @@
-"""Tests of drip_cert.analysis.mlp_bounds: activation constants, Lipschitz and Jacobian-Lipschitz
+"""Tests of drip_cert.analysis.mlp: activation constants, Lipschitz and Jacobian-Lipschitz
 bounds of MLPs (DRIP Assumption PolicyRegularity), LipSDP, interval enclosures."""
 
 from __future__ import annotations
@@ -12,7 +12,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from drip_cert._jax import jax, jnp
-from drip_cert.analysis.mlp_bounds import (
+from drip_cert.analysis.mlp import (
     activation_bounds,
     enclose_activation,
     enclose_activation_prime,
@@ -101,8 +101,10 @@ def test_activation_closed_forms():
     # Phi(z) + z phi(z), so GELU'(z) + GELU'(-z) = 1)
     assert gelu.slope_hi == pytest.approx(1.1289, abs=BRIEF_DECIMALS)
     assert gelu.slope_hi + gelu.slope_lo == pytest.approx(1.0, abs=ARB_BOUND_ATOL)
-    with pytest.raises(SpecError, match="relu"):
-        activation_bounds("relu")
+    relu = activation_bounds("relu")  # Clarke slopes [0, 1]; the slope is not Lipschitz
+    assert (relu.slope_lo, relu.slope_hi, relu.abs_curv) == (0.0, 1.0, math.inf)
+    with pytest.raises(SpecError, match="softsign"):
+        activation_bounds("softsign")
 
 
 # ----------------------------------------------------------------- Jacobian, Lipschitz

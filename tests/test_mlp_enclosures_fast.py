@@ -1,5 +1,5 @@
 """Fast vectorised enclosures of MLP values, Jacobians and Hessians over many boxes
-(drip_cert.analysis.mlp_enclosures): containment of the exact (Arb) point values, tightness
+(drip_cert.analysis.mlp.derivatives): containment of the exact (Arb) point values, tightness
 against the plain interval route, and detection of a dropped rounding or a wrong sign."""
 
 from __future__ import annotations
@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 from flint import arb, ctx
 
-import drip_cert.analysis.mlp_enclosures as enc
-from drip_cert.analysis.mlp_bounds import enclose_jacobian, enclose_output
-from drip_cert.analysis.mlp_enclosures import (
+import drip_cert.model.activations as acts
+from drip_cert.analysis.mlp import enclose_jacobian, enclose_output
+from drip_cert.analysis.mlp.derivatives import (
     enclose_activation_second,
     enclose_derivatives,
     enclose_jacobian_centred,
@@ -195,11 +195,15 @@ def test_dropping_the_outward_rounding_or_flipping_a_sign_is_detected(monkeypatc
         return _contains(lo, hi, vals)
 
     assert second_contained()
+
+    def plain_mul(alo, ahi, blo, bhi):  # the four end products, NOT rounded outward
+        p = np.stack([alo * blo, alo * bhi, ahi * blo, ahi * bhi])
+        return p.min(axis=0), p.max(axis=0)
+
     with monkeypatch.context() as mp:
-        mp.setattr(enc, "down_np", lambda x, ulps=1: np.asarray(x, dtype=float))
-        mp.setattr(enc, "up_np", lambda x, ulps=1: np.asarray(x, dtype=float))
-        mp.setattr(enc, "widen_np", lambda y, rel, abs_=0.0: (np.asarray(y), np.asarray(y)))
-        mp.setattr(enc, "_sech2_bounds", lambda a: (1.0 / np.cosh(a) ** 2,) * 2)
+        mp.setattr(acts, "imul", plain_mul)
+        mp.setattr(acts, "tanh_bounds", lambda x: (np.tanh(x), np.tanh(x)))
+        mp.setattr(acts, "sech2_bounds", lambda a: (1.0 / np.cosh(a) ** 2,) * 2)
         assert not second_contained()
 
     mlp = _mlp("tanh", seed=9, scale=1.5)
@@ -214,7 +218,9 @@ def test_dropping_the_outward_rounding_or_flipping_a_sign_is_detected(monkeypatc
         )
 
     assert hessian_contained()
-    orig = enc._tanh_second_point
+    orig = acts.Tanh._second_point
     with monkeypatch.context() as mp:
-        mp.setattr(enc, "_tanh_second_point", lambda x: tuple(-v for v in orig(x)[::-1]))
+        mp.setattr(
+            acts.Tanh, "_second_point", lambda self, x: tuple(-v for v in orig(self, x)[::-1])
+        )
         assert not hessian_contained()

@@ -188,3 +188,48 @@ def test_matrix_bnb_on_a_wider_network_reaches_its_tolerance():
     assert dec is not None
     out = matrix_bnb(dec, np.array([[-1.0, 1.0], [-1.0, 1.0]]), "mu2", tol=1e-3, max_boxes=200_000)
     assert out.result.converged and out.upper < 0
+
+
+# ----------------------------------------------------------------- nonsmooth (relu) networks
+
+
+@pytest.mark.parametrize("act", ["relu", "leaky_relu(0.1)"])
+@pytest.mark.parametrize("objective", ["mu2", "norm2"])
+def test_relu_box_bounds_dominate_every_sampled_clarke_jacobian(act, objective):
+    """A random-weight relu network's closed loop: the bound on every box is never below the
+    sampled value (so the proved rate is never above the sampled one), including boxes that
+    cross the kinks, where the sampled Jacobians on both sides are elements of the Clarke
+    Jacobian (docs/math/nonsmooth.md)."""
+    mlp = _mlp(act, sizes=(2, 16, 16, 2), seed=7, scale=2.0)
+    assert not mlp.smooth
+    J, mlps, jac = _loop(mlp, gain=1.0)
+    dec = decompose_jacobian(J, X, mlps)
+    assert dec is not None
+    rng = np.random.default_rng(8)
+    for rad in (1.0, 0.2, 0.02):
+        c = rng.uniform(-1.5, 1.5, (30, 2))
+        boxes = np.stack([c - rad, c + rad], axis=-1)
+        ub, val, _ = box_bounds(dec, boxes, objective)
+        assert np.all(np.isfinite(ub))
+        for k in range(boxes.shape[0]):
+            pts = c[k] + rng.uniform(-rad, rad, (400, 2))
+            M = dec.evaluate(pts)  # jacobian_np: one Clarke element at every point
+            f = mu_2(M) if objective == "mu2" else np.linalg.norm(M, ord=2, axis=(1, 2))
+            assert f.max() <= ub[k] + SAMPLE_TOL
+            assert val[k] <= ub[k] + SAMPLE_TOL
+
+
+def test_relu_rate_on_a_box_is_never_above_the_sampled_rate_and_has_no_jacobian_lipschitz():
+    mlp = _mlp("relu", sizes=(2, 16, 16, 2), seed=9, scale=1.5)
+    J, mlps, _ = _loop(mlp, gain=0.5)
+    dec = decompose_jacobian(J, X, mlps)
+    assert dec is not None
+    box = np.array([[-1.0, 1.0], [-1.0, 1.0]])
+    res = matrix_bnb(dec, box, "mu2", max_boxes=400, n_samples=2000)
+    g = np.linspace(-1.0, 1.0, 101)
+    grid = np.stack(np.meshgrid(g, g), axis=-1).reshape(-1, 2)
+    sampled = float(mu_2(dec.evaluate(grid)).max())
+    assert res.upper >= sampled - SAMPLE_TOL  # rate = -upper <= -sampled
+    # the Jacobian jumps across the kinks: no Lipschitz constant, never a finite one
+    ub, _, _ = box_bounds(dec, box[None], "jac_lipschitz")
+    assert ub[0] == math.inf

@@ -37,7 +37,8 @@ import sympy as sp
 
 from drip_cert.analysis.constants import batch_fn
 from drip_cert.analysis.growth import growth_bound, sup_bound
-from drip_cert.analysis.mlp_bounds import enclose_output, lipschitz_bound
+from drip_cert.analysis.mlp import enclose_output, lipschitz_bound
+from drip_cert.model.activations import Identity
 from drip_cert.model.blocks import block_applications
 from drip_cert.model.mlp import MLP
 from drip_cert.model.system import System
@@ -111,22 +112,26 @@ def affine_in_blocks(exprs: sp.MatrixBase, s: System) -> AffineBlocks | None:
 
 
 def mlp_output_bound(mlp: MLP) -> float:
-    """``sup_x ||mlp(x)||_2`` for bounded hidden activations (tanh), else ``inf`` (rounded up).
+    """``sup_x ||mlp(x)||_2`` for bounded activations, else ``inf`` (rounded up).
 
-    The last hidden layer outputs lie in ``[-1, 1]^w`` for tanh, so the affine output layer gives
-    ``||W z + b|| <= || |W| 1 + |b| ||`` entrywise (row sums and the norm rounded up). A tanh
-    output layer gives ``sqrt(out_dim)``. (GELU is unbounded: ``inf``.)
+    When the last hidden layer's activation has a bounded range (tanh ``[-1, 1]``, sigmoid
+    ``[0, 1]``: :attr:`Activation.value_range`), its outputs lie in ``[-m, m]^w`` with ``m`` the
+    largest end modulus, so an affine output layer gives ``||W z + b|| <= || m |W| 1 + |b| ||``
+    entrywise (row sums and the norm rounded up). A bounded output activation gives
+    ``m_out sqrt(out_dim)``. (GELU, relu, ... are unbounded: ``inf``.)
     """
-    if (
-        mlp.activation != "tanh"
-        or len(mlp.weights) < 2
-        or mlp.output_activation not in (None, "identity", "tanh")
-    ):
+    out = mlp.activations[-1]
+    lo, hi = out.value_range
+    if math.isfinite(lo) and math.isfinite(hi):
+        return mul_up(max(abs(lo), abs(hi)), sqrt_up(float(mlp.out_dim)))
+    if len(mlp.weights) < 2 or not isinstance(out, Identity):
         return math.inf
-    if mlp.output_activation == "tanh":
-        return sqrt_up(float(mlp.out_dim))
+    lo, hi = mlp.activations[-2].value_range
+    m = max(abs(lo), abs(hi))
+    if not math.isfinite(m):
+        return math.inf
     W, b = mlp.weights[-1], mlp.biases[-1]
-    rows = sum_up_np(np.concatenate([np.abs(W), np.abs(b)[:, None]], axis=1), axis=1)
+    rows = sum_up_np(np.concatenate([up_np(m * np.abs(W)), np.abs(b)[:, None]], axis=1), axis=1)
     return float(norm2_up_np(rows))
 
 

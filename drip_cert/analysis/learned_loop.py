@@ -30,7 +30,7 @@ Floating point: the coefficients are read from sympy with ``float()`` (within
 is bounded in Arb (:func:`~drip_cert.analysis.lognorm.mu2_constant_bounds`) and widened by the
 Frobenius norm of the conversion radius (Weyl); norms are rigorous upper bounds and every sum and
 product is rounded up. The Lipschitz constants come from
-:func:`~drip_cert.analysis.mlp_bounds.lipschitz_bound` (the smaller of the layer product and the
+:func:`~drip_cert.analysis.mlp.lipschitz_bound` (the smaller of the layer product and the
 verified LipSDP bound), with their own provenance: the rate's ``how`` is derived from them.
 """
 
@@ -46,7 +46,7 @@ import sympy as sp
 from drip_cert.analysis.closed_loop import CONVERSION_ULPS, AffineBlocks, affine_in_blocks
 from drip_cert.analysis.contraction import ContractionResult
 from drip_cert.analysis.lognorm import mu2_constant_bounds
-from drip_cert.analysis.mlp_bounds import enclose_jacobian, enclose_output, lipschitz_bound
+from drip_cert.analysis.mlp import enclose_jacobian, enclose_output, lipschitz_bound
 from drip_cert.analysis.policy_regularity import difference_jacobian_lipschitz
 from drip_cert.model.system import System
 from drip_cert.numerics.bnb import maximize

@@ -13,7 +13,7 @@ with constant ``A`` and ``T_k``. The closed-loop Jacobian of the paper's example
 
 Bound on one box ``B = [c - r, c + r]`` (:func:`box_bounds`). Let ``[J_c]`` enclose ``M(c)``,
 ``[H_B]`` enclose the derivative ``dM/dx_l`` over ``B`` (both from the MLP enclosures of
-:mod:`drip_cert.analysis.mlp_enclosures`, contracted with ``T_k``), ``J0`` the float midpoint of
+:mod:`drip_cert.analysis.mlp.derivatives`, contracted with ``T_k``), ``J0`` the float midpoint of
 ``[J_c]`` and ``G_l`` the float midpoint of the enclosure of ``dM/dx_l(c)``. By the mean value
 theorem applied to each entry,
 
@@ -58,13 +58,14 @@ import numpy as np
 import sympy as sp
 
 from drip_cert.analysis.closed_loop import CONVERSION_ULPS
-from drip_cert.analysis.mlp_bounds import _mid_rad, jacobian_np
-from drip_cert.analysis.mlp_enclosures import enclose_box_and_centre
+from drip_cert.analysis.mlp import jacobian_np
+from drip_cert.analysis.mlp.derivatives import enclose_box_and_centre
 from drip_cert.errors import SpecError
 from drip_cert.model.blocks import BlockFunction, block_applications
 from drip_cert.model.mlp import MLP
 from drip_cert.model.system import System
 from drip_cert.numerics.bnb_batch import BatchBnbResult, maximize_batch
+from drip_cert.numerics.interval_np import mid_rad
 from drip_cert.numerics.rounding import (
     add_down_np,
     add_up_np,
@@ -218,7 +219,7 @@ def _contract(T: np.ndarray, T_rad: np.ndarray, lo: np.ndarray, hi: np.ndarray):
     ``2 gamma_{K+2}`` times the float magnitude ``(|m| + rr) (|T| + T_rad)^T`` covers both (Higham
     Thm 3.1), plus an underflow term. Sums rounded outward one at a time.
     """
-    m, rr = _mid_rad(lo, hi)
+    m, rr = mid_rad(lo, hi)
     aT = np.abs(T)
     c = m @ T.T
     am = np.abs(m) + rr
@@ -230,23 +231,39 @@ def _contract(T: np.ndarray, T_rad: np.ndarray, lo: np.ndarray, hi: np.ndarray):
 
 
 def _combine(dec: JacobianInBlocks, lo: np.ndarray, hi: np.ndarray):
-    """``[M(c)]`` (``(N, p, q)``), ``[dM/dx(c)]`` and ``[dM/dx(B)]`` (``(N, p, q, d)``) for boxes
-    ``(N, d)``, as ``(lo, hi)`` pairs."""
+    """``[M]`` (``(N, p, q)``), ``[dM/dx(c)]`` and ``[dM/dx(B)]`` (``(N, p, q, d)``) for boxes
+    ``(N, d)``, as ``(lo, hi)`` pairs, and ``[M(c)]`` at the centres (for the estimates).
+
+    A smooth block enters ``[M]`` at the centre and the derivative terms through its Hessian
+    (the mean-value form of the module docstring). A nonsmooth block (relu) has no Hessian: it
+    enters ``[M]`` with the enclosure of its Clarke Jacobian over the WHOLE box and the derivative
+    terms with zero, so ``M(x) in [M]`` for every ``x`` in the box and every element of the
+    generalized Jacobian there (docs/math/nonsmooth.md); the bound is then first order in the box
+    radius.
+    """
     N, d = lo.shape
     p, q = dec.A.shape
     jc_lo = np.broadcast_to(sub_down_np(dec.A, dec.A_rad), (N, p, q))
     jc_hi = np.broadcast_to(add_up_np(dec.A, dec.A_rad), (N, p, q))
+    jv_lo, jv_hi = jc_lo, jc_hi
     hc_lo = hc_hi = hb_lo = hb_hi = np.zeros((N, p, q, d))
     for T, T_rad, mlp in zip(dec.T, dec.T_rad, dec.mlps):
-        box, cen = enclose_box_and_centre(mlp, lo, hi, hessian=True)
-        assert box.hessian is not None and cen.hessian is not None
+        box, cen = enclose_box_and_centre(mlp, lo, hi, hessian=mlp.smooth)
         o = mlp.out_dim
         Tm, Tr = T.reshape(p * q, o * d), T_rad.reshape(p * q, o * d)
-        a_lo, a_hi = _contract(
-            Tm, Tr, cen.jacobian[0].reshape(N, o * d), cen.jacobian[1].reshape(N, o * d)
-        )
-        jc_lo = add_down_np(jc_lo, a_lo.reshape(N, p, q))
-        jc_hi = add_up_np(jc_hi, a_hi.reshape(N, p, q))
+
+        def contract(jac, Tm=Tm, Tr=Tr, o=o):
+            a_lo, a_hi = _contract(Tm, Tr, jac[0].reshape(N, o * d), jac[1].reshape(N, o * d))
+            return a_lo.reshape(N, p, q), a_hi.reshape(N, p, q)
+
+        v_lo, v_hi = contract(cen.jacobian)
+        jv_lo, jv_hi = add_down_np(jv_lo, v_lo), add_up_np(jv_hi, v_hi)
+        if not mlp.smooth:
+            b_lo, b_hi = contract(box.jacobian)
+            jc_lo, jc_hi = add_down_np(jc_lo, b_lo), add_up_np(jc_hi, b_hi)
+            continue
+        jc_lo, jc_hi = add_down_np(jc_lo, v_lo), add_up_np(jc_hi, v_hi)
+        assert box.hessian is not None and cen.hessian is not None
         for (hlo, hhi), which in ((cen.hessian, "c"), (box.hessian, "b")):
             # H[n, o, i, l] -> rows (n, l), columns (o, i)
             flo = np.moveaxis(hlo, -1, 1).reshape(N * d, o * d)
@@ -258,7 +275,7 @@ def _combine(dec: JacobianInBlocks, lo: np.ndarray, hi: np.ndarray):
                 hc_lo, hc_hi = add_down_np(hc_lo, g_lo), add_up_np(hc_hi, g_hi)
             else:
                 hb_lo, hb_hi = add_down_np(hb_lo, g_lo), add_up_np(hb_hi, g_hi)
-    return (jc_lo, jc_hi), (hc_lo, hc_hi), (hb_lo, hb_hi)
+    return (jc_lo, jc_hi), (hc_lo, hc_hi), (hb_lo, hb_hi), (jv_lo, jv_hi)
 
 
 def _embed(L: np.ndarray, R: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -304,8 +321,11 @@ def box_bounds(
     boxes = np.asarray(boxes, dtype=float)
     lo, hi = boxes[..., 0], boxes[..., 1]
     N, d = lo.shape
-    c, r = _mid_rad(lo, hi)
-    (jc_lo, jc_hi), (hc_lo, hc_hi), (hb_lo, hb_hi) = _combine(dec, lo, hi)
+    c, r = mid_rad(lo, hi)
+    (jc_lo, jc_hi), (hc_lo, hc_hi), (hb_lo, hb_hi), (jv_lo, jv_hi) = _combine(dec, lo, hi)
+    if objective == "jac_lipschitz" and not all(m.smooth for m in dec.mlps):
+        # a relu block's Jacobian jumps across a kink: no Lipschitz constant exists
+        return np.full(N, np.inf), np.full(N, np.inf), c
     if objective == "jac_lipschitz":
         H = np.maximum(np.abs(hb_lo), np.abs(hb_hi)).reshape(N, -1, d)
         _, gram = matmul_bounds(np.swapaxes(H, -1, -2), H)
@@ -315,7 +335,7 @@ def box_bounds(
         Hc = (0.5 * (hc_lo + hc_hi)).reshape(N, -1, d)
         val = np.sqrt(np.linalg.eigvalsh(np.swapaxes(np.abs(Hc), -1, -2) @ np.abs(Hc))[:, -1])
         return ub, val, c
-    J0, jrad = _mid_rad(jc_lo, jc_hi)
+    J0, jrad = mid_rad(jc_lo, jc_hi)
     G = 0.5 * (hc_lo + hc_hi)
     D = np.maximum(sub_up_np(hb_hi, G), sub_up_np(G, hb_lo))
     # R = rad[J_c] + sum_l D_l r_l (d non-negative terms: 2 gamma_{d+1} covers the float sum)
@@ -341,11 +361,12 @@ def box_bounds(
         ub = np.asarray(
             sym_lambda_max_upper(L.reshape(N * V, p, q), Rtot.reshape(N * V, p, q))
         ).reshape(N, V)
-        val = np.linalg.eigvalsh(0.5 * (J0 + np.swapaxes(J0, -1, -2)))[:, -1]
+        Jv = 0.5 * (jv_lo + jv_hi)  # M at the centre (an estimate)
+        val = np.linalg.eigvalsh(0.5 * (Jv + np.swapaxes(Jv, -1, -2)))[:, -1]
     else:
         E, F = _embed(L.reshape(N * V, p, q), np.ascontiguousarray(Rtot).reshape(N * V, p, q))
         ub = np.asarray(sym_lambda_max_upper(E, F)).reshape(N, V)
-        val = np.linalg.norm(J0, ord=2, axis=(-2, -1))
+        val = np.linalg.norm(0.5 * (jv_lo + jv_hi), ord=2, axis=(-2, -1))
     return ub.max(axis=1), val, c
 
 

@@ -1,7 +1,7 @@
 """Regularity of a policy's Jacobian: a bound on ``L_dpi`` (DRIP Assumption "PolicyRegularity" (b)).
 
 Routes, strongest first: an affine policy (exact 0); a policy affine in MLP blocks applied to the
-state (the layerwise bound of :mod:`drip_cert.analysis.mlp_bounds`, global); a policy without
+state (the layerwise bound of :mod:`drip_cert.analysis.mlp.lipschitz`, global); a policy without
 blocks on a box (interval enclosures of its second derivatives, valid on that box only); otherwise
 a sampled estimate. A kink of the Jacobian (``Abs``, ``Max``, ``Min``) anywhere the policy is used
 makes the constant infinite: the assumption fails there.
@@ -15,7 +15,8 @@ import numpy as np
 import sympy as sp
 
 from drip_cert.analysis.closed_loop import affine_in_blocks
-from drip_cert.analysis.mlp_bounds import jacobian_lipschitz_bound
+from drip_cert.analysis.mlp import jacobian_lipschitz_bound
+from drip_cert.model.blocks import block_applications
 from drip_cert.model.system import System
 from drip_cert.numerics.interval import UnsupportedExpression, enclose_expr
 from drip_cert.numerics.rounding import add_up, mul_up, spectral_norm_upper, sq_up, sqrt_up
@@ -30,7 +31,7 @@ def jacobian_lipschitz(s: System, which: str, box: np.ndarray | None = None) -> 
 
     Routes: zero Hessian (affine policy, exact 0); a policy ``A x + b + C h(x)`` linear in MLP
     blocks applied to the state gives ``sum ||C_h||_2 L_dh`` with the sound layerwise bound of
-    :func:`drip_cert.analysis.mlp_bounds.jacobian_lipschitz_bound` (global); a policy without blocks
+    :func:`drip_cert.analysis.mlp.jacobian_lipschitz_bound` (global); a policy without blocks
     gets a sound bound on ``box`` from interval enclosures of its second derivatives
     (``||d^2 pi|| <= ||d^2 pi||_F``), valid on that box only; anything else is a sampled
     estimate of ``sup ||d^2 pi||_F`` (labelled so).
@@ -60,6 +61,21 @@ def _jacobian_lipschitz_of(
 ) -> Quantity | None:
     """The routes of :func:`jacobian_lipschitz` for the policy expressions ``pol`` (``None``
     instead of the sampled estimate when ``estimate`` is False)."""
+    rough = sorted(
+        f"{b} ({', '.join(a.spec for a in mlp.activations if not a.smooth)})"
+        for b, mlp in ((b, s.blocks[b].mlp) for e in pol for b in _block_names(e))
+        if mlp is not None and not mlp.smooth
+    )
+    if rough:
+        return Quantity(
+            name,
+            math.inf,
+            How.SOUND,
+            "DRIP Assumption PolicyRegularity (b)",
+            f"not Lipschitz: the policy's Jacobian jumps across the kinks of the network "
+            f"{rough[0]} (piecewise linear), so no Lipschitz constant exists "
+            "(docs/math/nonsmooth.md)",
+        )
     jump, branch = _kink_branches(pol, s, box)
     if jump is not None:
         return Quantity(
@@ -148,6 +164,10 @@ def _jacobian_lipschitz_of(
         "sampled sup ||d^2 pi||_F on the support box enlarged by 1 (4096 points, "
         "seed 0): an estimate, not a bound",
     )
+
+
+def _block_names(e: sp.Expr) -> set[str]:
+    return {a.block_name for a in block_applications(e)}
 
 
 def _kinks(pol: sp.Matrix, s: System) -> list[sp.Expr]:

@@ -31,6 +31,7 @@ from drip_cert._jax import jax, jnp
 from drip_cert.errors import SpecError
 from drip_cert.learn.data import DEFAULT_SUBSTEPS, Demonstrations, simulate_closed_loop
 from drip_cert.learn.losses import LossSpec, Targets, expert_targets, imitation_loss
+from drip_cert.model.activations import get_activation
 from drip_cert.model.mlp import ACTIVATIONS, MLP, apply_params, init_mlp, mlp_from_params
 
 METHODS = ("tasil", "bc")
@@ -64,16 +65,29 @@ class TrainSettings:
     skip: bool = False
     lipschitz_budget: float = float("inf")
 
+    @staticmethod
+    def _known(name: str) -> bool:
+        try:
+            get_activation(name)
+        except SpecError:
+            return False
+        return True
+
     def __post_init__(self) -> None:
         if self.method not in METHODS:
             raise SpecError(f"method must be one of {METHODS}, got {self.method!r}", field="method")
-        if self.activation not in ("tanh", "gelu"):
+        try:
+            hidden_act = get_activation(self.activation)
+        except SpecError as exc:
+            raise SpecError(str(exc), field="activation") from None
+        if not hidden_act.smooth:
             raise SpecError(
-                f"activation must be 'tanh' or 'gelu' (smooth, as the TaSIL certificate needs a "
-                f"Lipschitz Jacobian), got {self.activation!r}",
+                f"activation must be smooth (the TaSIL certificate's lemma route needs a "
+                f"Lipschitz Jacobian), got {self.activation!r}; use tanh, gelu, sigmoid, "
+                f"softplus, silu or elu(1.0)",
                 field="activation",
             )
-        if self.output_activation is not None and self.output_activation not in ACTIVATIONS:
+        if self.output_activation is not None and not self._known(self.output_activation):
             raise SpecError(
                 f"output_activation must be None or one of {ACTIVATIONS}, "
                 f"got {self.output_activation!r}",

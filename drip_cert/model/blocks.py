@@ -20,7 +20,8 @@ import numpy as np
 import sympy as sp
 
 from drip_cert.errors import SpecError
-from drip_cert.model.mlp import MLP, load_mlp
+from drip_cert.model.mlp import MLP
+from drip_cert.model.network_files import load_network
 
 
 class BlockFunction(sp.Function):
@@ -144,7 +145,12 @@ class Block:
     def to_dict(self) -> dict[str, Any]:
         out: dict[str, Any] = {"name": self.name, "inputs": self.in_dim, "outputs": self.out_dim}
         if self.mlp is not None:
-            out.update(kind="mlp", sizes=list(self.mlp.sizes), activation=self.mlp.activation)
+            out.update(
+                kind="mlp",
+                sizes=list(self.mlp.sizes),
+                activation=self.mlp.activation,
+                activations=list(self.mlp.activation_specs),
+            )
         if self.source:
             out["source"] = self.source
         return out
@@ -160,13 +166,14 @@ def mlp_block(name: str, mlp: MLP, source: str = "") -> Block:
 def load_mlp_block(
     name: str,
     weights: str | Path,
-    inputs: int,
-    outputs: int,
-    activation: str | None = None,
+    inputs: int | None,
+    outputs: int | None,
+    activation: str | list[str] | None = None,
     field: str | None = None,
 ) -> Block:
-    """Load an MLP block from ``weights`` (.npz, ``allow_pickle=False``), checking its shape."""
-    mlp = load_mlp(
+    """Load an MLP block from ``weights`` (``.onnx``, ``.safetensors`` or ``.npz``:
+    :func:`~drip_cert.model.network_files.load_network`), checking its shape when given."""
+    mlp = load_network(
         weights, activation=activation, expect_in=inputs, expect_out=outputs, field=field
     )
     return mlp_block(name, mlp, source=str(weights))

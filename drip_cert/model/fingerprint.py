@@ -174,7 +174,10 @@ class _Hasher:
                 self.text("opaque:" + b.source, tag + ".kind")
                 continue
             mlp = b.mlp
-            self.text(f"mlp:{mlp.activation}:{mlp.output_activation}", tag + ".kind")
+            kind = f"mlp:{mlp.activation}:{mlp.output_activation}"
+            if mlp.activation == "mixed":  # per-layer activations (uniform ones hash as before)
+                kind = "mlp:" + ",".join(mlp.activation_specs)
+            self.text(kind, tag + ".kind")
             for i, (w, bias) in enumerate(zip(mlp.weights, mlp.biases, strict=True)):
                 self.array(w, f"{tag}.W{i}")
                 self.array(bias, f"{tag}.b{i}")

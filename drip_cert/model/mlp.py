@@ -7,11 +7,14 @@ File format (shared by learned policies and by opaque blocks such as the paper's
   followed by the hidden activation; the last layer is affine, optionally followed by
   ``output_activation``.
 * ``NAME.json`` (optional; architecture metadata): ``{"activation": "tanh",
-  "output_activation": null, "sizes": [in, h1, ..., out]}``. When absent the activation must be
-  given by the caller.
+  "output_activation": null, "activations": ["tanh", "tanh", "identity"], "sizes": [in, h1, ...,
+  out]}`` (``activations``: one per layer, the output layer included; it wins over the other two
+  when present). When absent the activation must be given by the caller.
 
-Only smooth activations are offered (tanh, GELU, identity): the TaSIL certificate needs a
-Lipschitz Jacobian (docs/math/tasil.md section 5).
+Activations are the classes of :mod:`drip_cert.model.activations` (one registry, names such as
+``"relu"``, ``"leaky_relu(0.2)"``); an MLP holds one per layer (:attr:`MLP.activations`). The
+TaSIL lemma route needs a Lipschitz Jacobian (docs/math/tasil.md section 5): every activation
+``smooth``; relu networks are certified through the routes that need none (docs/math/nonsmooth.md).
 """
 
 from __future__ import annotations
@@ -23,40 +26,71 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from scipy.special import erf
 
 from drip_cert.errors import SpecError
+from drip_cert.model.activations import ACTIVATIONS as _REGISTRY
+from drip_cert.model.activations import Activation, Identity, get_activation
 from drip_cert.numerics.user_files import input_file, read_npz
 
-ACTIVATIONS = ("tanh", "gelu", "identity")
+ACTIVATIONS = tuple(_REGISTRY)
+"""The registered activation names (:data:`drip_cert.model.activations.ACTIVATIONS`)."""
+ActivationLike = str | Activation | None
 _NARROW_INPUT = 8  # MLP.apply_jax writes a first layer this narrow as broadcast products
 
 
 @dataclass(frozen=True)
 class MLP:
-    """A fully connected network ``x -> W_{L-1} s(... s(W_0 x + b_0) ...) + b_{L-1}``.
+    """A fully connected network ``x -> s_{L-1}(W_{L-1} s_{L-2}(... s_0(W_0 x + b_0) ...) +
+    b_{L-1})`` with one activation ``s_k`` per layer.
 
     Parameters
     ----------
     weights, biases
         Tuples of numpy arrays, ``weights[i]`` of shape ``(out_i, in_i)``.
     activation
-        Hidden activation, one of :data:`ACTIVATIONS`.
+        Hidden activation (every layer but the last): a registry name or an
+        :class:`~drip_cert.model.activations.Activation`.
     output_activation
         Optional activation after the last layer (``None`` for affine output).
+    activations
+        One activation per layer, the output layer included (wins over the two above). After
+        construction it always holds the per-layer :class:`Activation` objects, and
+        ``activation`` / ``output_activation`` hold their spec strings (``activation`` is
+        ``"mixed"`` when the hidden layers differ).
     """
 
     weights: tuple[np.ndarray, ...]
     biases: tuple[np.ndarray, ...]
     activation: str = "tanh"
     output_activation: str | None = None
+    activations: tuple[Activation, ...] = ()
 
     def __post_init__(self) -> None:
         if len(self.weights) != len(self.biases) or not self.weights:
             raise SpecError("an MLP needs as many bias vectors as weight matrices, at least one")
-        for act in (self.activation, self.output_activation):
-            if act is not None and act not in ACTIVATIONS:
-                raise SpecError(f"activation {act!r} is not one of {ACTIVATIONS}")
+        n = len(self.weights)
+        if self.activations:
+            acts = tuple(get_activation(a) for a in self.activations)
+            if len(acts) != n:
+                raise SpecError(
+                    f"activations has {len(acts)} entries but the network has {n} layers "
+                    "(give one per layer, the output layer included)"
+                )
+        else:
+            hidden = get_activation(self.activation)
+            acts = (hidden,) * (n - 1) + (get_activation(self.output_activation),)
+        hid = {a.spec for a in acts[:-1]}
+        if len(hid) == 1:
+            object.__setattr__(self, "activation", acts[0].spec)
+        elif len(hid) > 1:
+            object.__setattr__(self, "activation", "mixed")
+        else:  # one affine layer: keep the given hidden name (unused), validated
+            object.__setattr__(self, "activation", get_activation(self.activation).spec)
+        out = acts[-1]
+        object.__setattr__(
+            self, "output_activation", None if isinstance(out, Identity) else out.spec
+        )
+        object.__setattr__(self, "activations", acts)
         prev = None
         ws, bs = [], []
         for i, (w, b) in enumerate(zip(self.weights, self.biases, strict=True)):
@@ -94,6 +128,16 @@ class MLP:
         return (self.in_dim, *(int(w.shape[0]) for w in self.weights))
 
     @property
+    def smooth(self) -> bool:
+        """True when every activation has a Lipschitz derivative (the Jacobian is Lipschitz)."""
+        return all(a.smooth for a in self.activations)
+
+    @property
+    def activation_specs(self) -> tuple[str, ...]:
+        """The spec string of each layer's activation (output layer included)."""
+        return tuple(a.spec for a in self.activations)
+
+    @property
     def n_params(self) -> int:
         return int(sum(w.size + b.size for w, b in zip(self.weights, self.biases)))
 
@@ -103,13 +147,7 @@ class MLP:
 
     def apply_np(self, x: np.ndarray) -> np.ndarray:
         """Evaluate with numpy on ``x`` of shape ``(..., in_dim)``."""
-        return apply_params(
-            self.params(),
-            np.asarray(x, dtype=np.float64),
-            self.activation,
-            self.output_activation,
-            xp=np,
-        )
+        return apply_params(self.params(), np.asarray(x, dtype=np.float64), self.activations, xp=np)
 
     def apply_jax(self, x):
         """Evaluate with jax.numpy on ``x`` of shape ``(..., in_dim)`` (traceable).
@@ -125,45 +163,51 @@ class MLP:
         from drip_cert._jax import jnp  # jax: keep off the CLI start-up path
 
         params = [(jnp.asarray(w), jnp.asarray(b)) for w, b in self.params()]
-        return apply_params(
-            params, x, self.activation, self.output_activation, xp=jnp, narrow_first=True
-        )
+        return apply_params(params, x, self.activations, xp=jnp, narrow_first=True)
 
     def save(self, path: str | Path) -> None:
         """Write ``path`` (.npz) and the metadata ``path.with_suffix('.json')`` atomically."""
         save_mlp(self, path)
 
 
-def activation_fn(name: str | None, xp):
+def activation_fn(name: ActivationLike, xp):
     """The activation ``name`` for the array module ``xp`` (numpy or jax.numpy)."""
-    if name is None or name == "identity":
-        return lambda z: z
-    if name == "tanh":
-        return xp.tanh
-    if name == "gelu":
-        # exact (erf) GELU: x * Phi(x); smooth, with bounded first and second derivatives
-        if xp is np:
-            return lambda z: 0.5 * z * (1.0 + erf(z / np.sqrt(2.0)))
-        from jax.scipy.special import erf as jax_erf  # jax: keep off the CLI start-up path
+    act = get_activation(name)
+    return lambda z: act.apply(z, xp)
 
-        return lambda z: 0.5 * z * (1.0 + jax_erf(z / np.sqrt(2.0)))
-    raise SpecError(f"activation {name!r} is not one of {ACTIVATIONS}")
+
+def layer_activations(
+    n_layers: int,
+    activation: ActivationLike | Sequence[ActivationLike],
+    output_activation: ActivationLike = None,
+) -> tuple[Activation, ...]:
+    """One activation per layer: ``activation`` for the hidden layers and ``output_activation``
+    for the last, or ``activation`` itself when it is a per-layer sequence."""
+    if isinstance(activation, (list, tuple)):
+        acts = tuple(get_activation(a) for a in activation)
+        if len(acts) != n_layers:
+            raise SpecError(f"{len(acts)} activations given for {n_layers} layers")
+        return acts
+    hidden = get_activation(activation)  # type: ignore[arg-type]
+    return (hidden,) * (n_layers - 1) + (get_activation(output_activation),)
 
 
 def apply_params(
     params,
     x,
-    activation: str,
-    output_activation: str | None = None,
+    activation: ActivationLike | Sequence[ActivationLike],
+    output_activation: ActivationLike = None,
     xp=np,
     narrow_first: bool = False,
 ):
     """Forward pass of the parameter pytree ``[(W, b), ...]`` on ``x`` of shape ``(..., in)``.
 
-    ``narrow_first``: write a first HIDDEN layer with at most ``_NARROW_INPUT`` inputs as
-    broadcast multiply-adds (see :meth:`MLP.apply_jax`); same value up to summation order.
+    ``activation``: the hidden activation (then ``output_activation`` is the last layer's) or
+    a sequence of one activation per layer. ``narrow_first``: write a first HIDDEN layer with
+    at most ``_NARROW_INPUT`` inputs as broadcast multiply-adds (see :meth:`MLP.apply_jax`);
+    same value up to summation order.
     """
-    act = activation_fn(activation, xp)
+    acts = layer_activations(len(params), activation, output_activation)
     h = x
     last = len(params) - 1
     for i, (w, b) in enumerate(params):
@@ -174,10 +218,8 @@ def apply_params(
             h = z
         else:
             h = h @ w.T + b
-        if i < last:
-            h = act(h)
-    if output_activation is not None:
-        h = activation_fn(output_activation, xp)(h)
+        if not isinstance(acts[i], Identity):
+            h = acts[i].apply(h, xp)
     return h
 
 
@@ -210,6 +252,7 @@ def save_mlp(mlp: MLP, path: str | Path) -> None:
     meta = {
         "activation": mlp.activation,
         "output_activation": mlp.output_activation,
+        "activations": list(mlp.activation_specs),
         "sizes": list(mlp.sizes),
     }
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -223,7 +266,7 @@ def save_mlp(mlp: MLP, path: str | Path) -> None:
 
 def load_mlp(
     path: str | Path,
-    activation: str | None = None,
+    activation: str | Sequence[str] | None = None,
     output_activation: str | None = None,
     expect_in: int | None = None,
     expect_out: int | None = None,
@@ -231,7 +274,9 @@ def load_mlp(
 ) -> MLP:
     """Load an MLP saved by :func:`save_mlp` (``allow_pickle=False``).
 
-    ``activation`` overrides the JSON metadata; one of the two must be present.
+    ``activation`` (one name for the hidden layers with an affine output, or a list with one
+    entry per layer, the output layer included) overrides the JSON metadata; one of the two
+    must be present.
     ``expect_in``/``expect_out`` check the declared shape. Every problem is a
     :class:`~drip_cert.errors.SpecError` naming the file and what to fix.
     """
@@ -259,7 +304,7 @@ def load_mlp(
     missing = [f"b{i}" for i in range(n_layers) if f"b{i}" not in files]
     if missing:
         raise SpecError(f"weights file {str(path)!r} lacks {missing}", field=field)
-    act = activation or meta.get("activation")
+    act = activation or meta.get("activations") or meta.get("activation")
     if act is None:
         raise SpecError(
             f"no activation for {str(path)!r}: give 'activation' or a .json file", field=field
@@ -269,8 +314,7 @@ def load_mlp(
         mlp = MLP(
             tuple(files[f"W{i}"] for i in range(n_layers)),
             tuple(files[f"b{i}"] for i in range(n_layers)),
-            act,
-            out_act,
+            activations=layer_activations(n_layers, act, out_act),
         )
     except SpecError as exc:
         raise SpecError(f"weights file {str(path)!r}: {exc}", field=field) from None
@@ -289,7 +333,11 @@ def load_mlp(
     return mlp
 
 
-def mlp_from_params(params, activation: str = "tanh", output_activation: str | None = None) -> MLP:
+def mlp_from_params(
+    params,
+    activation: ActivationLike | Sequence[ActivationLike] = "tanh",
+    output_activation: ActivationLike = None,
+) -> MLP:
     """The :class:`MLP` value object of a parameter pytree ``[(W0, b0), (W1, b1), ...]``.
 
     ``params`` may hold numpy or jax arrays (e.g. the result of training); they are copied to
@@ -303,7 +351,7 @@ def mlp_from_params(params, activation: str = "tanh", output_activation: str | N
         raise SpecError(
             f"MLP parameters must be a sequence of (W, b) pairs of arrays: {exc}"
         ) from None
-    return MLP(ws, bs, activation, output_activation)
+    return MLP(ws, bs, activations=layer_activations(len(ws), activation, output_activation))
 
 
 def jax_params(mlp: MLP) -> list:

@@ -252,20 +252,28 @@ def spec_from_dict(doc: Mapping[str, Any], path: Path | None = None) -> Spec:
         kind = bdef.get("kind", "mlp")
         if kind != "mlp":
             raise err(f'kind {kind!r} is not supported; use kind = "mlp"', f"{fld}.kind")
-        for key in ("weights", "inputs", "outputs"):
-            if key not in bdef:
-                raise err(f"missing key {key!r}", f"{fld}.{key}")
+        if "weights" not in bdef:
+            raise err(
+                "missing key 'weights' (a .onnx, .safetensors or .npz file)", f"{fld}.weights"
+            )
         weights = bdef["weights"]
         if not isinstance(weights, str):
             raise err("must be a path string", f"{fld}.weights")
         wpath = Path(weights)
         if not wpath.is_absolute():
             wpath = base / wpath
-        ins = _posint(bdef["inputs"], f"{fld}.inputs", err)
-        outs = _posint(bdef["outputs"], f"{fld}.outputs", err)
+        # optional: read from the network (checked against it when given)
+        ins = _posint(bdef["inputs"], f"{fld}.inputs", err) if "inputs" in bdef else None
+        outs = _posint(bdef["outputs"], f"{fld}.outputs", err) if "outputs" in bdef else None
         act = bdef.get("activation")
-        if act is not None and not isinstance(act, str):
-            raise err("must be a string", f"{fld}.activation")
+        if act is not None and not (
+            isinstance(act, str) or (isinstance(act, list) and all(isinstance(a, str) for a in act))
+        ):
+            raise err(
+                "must be a name (hidden layers, affine output) or a list of names, one per "
+                'layer with the output layer included, e.g. ["relu", "relu", "identity"]',
+                f"{fld}.activation",
+            )
         try:
             blocks[bname] = load_mlp_block(bname, wpath, ins, outs, act, field=f"{fld}.weights")
         except SpecError as exc:

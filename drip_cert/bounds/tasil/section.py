@@ -16,6 +16,7 @@ from drip_cert.analysis.policy_regularity import (
     difference_jacobian_lipschitz,
     jacobian_lipschitz,
 )
+from drip_cert.bounds.tasil._common import up_closed_form
 from drip_cert.bounds.tasil.certificate import TasilCertificate, tasil_certificate
 from drip_cert.bounds.tasil.forms import FORMS, TasilForm
 from drip_cert.bounds.tasil.trajectory import TrajectoryH, h_continuous
@@ -183,9 +184,11 @@ def tasil_section(
                 R,
                 settings,
                 method,
+                comparison_gain,
+                uniform_h0,
             ),
             provenance,
-            tuple(qs),
+            tuple(qs) + tuple(q for q in (comparison_gain, uniform_h0) if q is not None),
         )
     h_train, how_t = trajectory_h(s, train, L_Delta.value, speed_sound)
     train_h0, train_h1 = [h.h0 for h in h_train], [h.h1 for h in h_train]
@@ -250,12 +253,46 @@ def _not_lipschitz(
     R: float,
     settings: TasilSettings,
     method: str,
+    comparison_gain: Quantity | None = None,
+    uniform_h0: Quantity | None = None,
 ) -> TasilCertificate:
-    """The TaSIL certificate when a policy's Jacobian has no Lipschitz constant: every form
-    fails (DRIP Assumption PolicyRegularity (b)); ``h_0``, ``h_1`` are not computed (their sound
-    continuous-time sups need ``L_Delta``)."""
-    why = f"DRIP Assumption PolicyRegularity (b) fails for {L.name}: {L.note}"
-    forms = tuple(TasilForm(name, math.inf, False, True, "not computed: " + why) for name in FORMS)
+    """The TaSIL certificate when a policy's Jacobian has no Lipschitz constant (DRIP Assumption
+    PolicyRegularity (b) fails: a relu network, an ``Abs`` kink).
+
+    The lemma and every statistical form built on it need ``L_Delta``: they are reported as
+    ``not applicable``, not as failed checks. The uniform form of docs/math/tasil.md 3.8 needs
+    no ``L_Delta`` (only the learned loop's contraction on all of ``R^n`` and a sound
+    ``sup_S ||pi_IL - pi*||``): when both are given it proceeds and gives ``rho``, with
+    probability 1. ``h_0``, ``h_1`` along trajectories are not computed (their sound
+    continuous-time sups need ``L_Delta``), so the comparison form (3.7) is not computed either.
+    """
+    why = (
+        "not applicable: the policy's Jacobian is not Lipschitz (the lemma route needs it): "
+        f"DRIP Assumption PolicyRegularity (b) fails for {L.name}: {L.note}"
+    )
+    forms = [TasilForm(name, math.inf, False, True, why) for name in FORMS if name != "uniform"]
+    rho, rho_form, gap, route = (
+        math.inf,
+        "held_out" if heldout is not None else "drip_shaped",
+        math.inf,
+        why,
+    )
+    if comparison_gain is not None and uniform_h0 is not None:
+        cg, u = comparison_gain.value, uniform_h0.value
+        uni = up_closed_form(cg * u)
+        if math.isfinite(uni):
+            forms.append(
+                TasilForm(
+                    "uniform",
+                    uni,
+                    True,
+                    False,
+                    f"every initial state of the support: gap <= sup||g||_2/lambda_IL * "
+                    f"sup_S ||pi_IL - pi*|| = {cg:.6g} * {u:.6g} (probability 1; needs no "
+                    "Lipschitz Jacobian)",
+                )
+            )
+            rho, rho_form, gap, route = uni, "uniform", uni, ""
     return TasilCertificate(
         method=method,
         h0=math.nan,
@@ -264,16 +301,16 @@ def _not_lipschitz(
         L_Delta=math.inf,
         eta=settings.eta,
         R=R,
-        gap_bound=math.inf,
-        gap_reason=why,
-        rho=math.inf,
-        rho_form="held_out" if heldout is not None else "drip_shaped",
+        gap_bound=gap,
+        gap_reason=route,
+        rho=rho,
+        rho_form=rho_form,
         delta=settings.delta,
         n=int(train.states.shape[0]),
         n_val=0 if heldout is None else int(heldout.states.shape[0]),
         tau0=math.nan,
         tau1=math.nan,
-        forms=forms,
-        vacuous_forms=FORMS,
+        forms=tuple(forms),
+        vacuous_forms=tuple(f.name for f in forms if f.vacuous or not f.holds),
         continuous=True,
     )
