@@ -47,6 +47,7 @@ from drip_cert.analysis.closed_loop import CONVERSION_ULPS, AffineBlocks, affine
 from drip_cert.analysis.contraction import ContractionResult
 from drip_cert.analysis.lognorm import mu2_constant_bounds
 from drip_cert.analysis.mlp_bounds import enclose_jacobian, enclose_output, lipschitz_bound
+from drip_cert.analysis.mlp_enclosures import enclose_jacobian_centred
 from drip_cert.analysis.policy_regularity import difference_jacobian_lipschitz
 from drip_cert.model.system import System
 from drip_cert.numerics.bnb import maximize
@@ -304,15 +305,22 @@ def _affine_enclosure(s: System, dec: AffineBlocks, lo: np.ndarray, hi: np.ndarr
     return olo, ohi
 
 
-def _difference_jacobian_at(s: System, dec: AffineBlocks, c: np.ndarray):
-    """Rigorous ``(lo, hi)`` of ``D Delta(c) = A + sum_k C_k Dh_k(c)`` at the point ``c``."""
+def _difference_jacobian_at(
+    s: System, dec: AffineBlocks, c: np.ndarray, hi: np.ndarray | None = None
+):
+    """Rigorous ``(lo, hi)`` of ``D Delta(x) = A + sum_k C_k Dh_k(x)`` at the point ``c`` or, with
+    ``hi``, for every ``x`` in the box ``[c, hi]`` (each network's Jacobian enclosed by
+    :func:`~drip_cert.analysis.mlp_enclosures.enclose_jacobian_centred` there)."""
     A = np.asarray(dec.A, dtype=float)
     ra = CONVERSION_ULPS * np.spacing(np.abs(A))
     jlo, jhi = sub_down_np(A, ra), add_up_np(A, ra)
     for name, C in dec.C.items():
         mlp = s.blocks[name].mlp
         assert mlp is not None
-        hlo, hhi = enclose_jacobian(mlp, c, c)
+        if hi is None:
+            hlo, hhi = enclose_jacobian(mlp, c, c)
+        else:
+            hlo, hhi = enclose_jacobian_centred(mlp, c, hi)
         m = 0.5 * hlo + 0.5 * hhi
         rr = up_np(np.maximum(hhi - m, m - hlo))
         plo, phi = matmul_bounds(C, m)
@@ -331,7 +339,9 @@ def sup_policy_difference(s: System, box: np.ndarray) -> Quantity | None:
 
     ``pi_IL - pi*`` must be affine in MLP blocks (shared blocks cancel first); each sub-box is
     enclosed by interval bound propagation through the networks and centre-radius products, the
-    norm of the enclosure rounded up. ``None`` when the difference has another form.
+    norm of the enclosure rounded up; the smallest of that, the first- and second-order forms
+    around the box centre and the centred form with the box's interval Jacobian (docs/math/tasil.md
+    section 3.9) bounds the sub-box. ``None`` when the difference has another form.
     """
     if s.learned is None:
         return None
@@ -353,9 +363,16 @@ def sup_policy_difference(s: System, box: np.ndarray) -> Quantity | None:
         ub = float(norm2_up_np(np.maximum(np.abs(lo), np.abs(hi))))
         c = 0.5 * B[:, 0] + 0.5 * B[:, 1]
         r = up_np(np.maximum(B[:, 1] - c, c - B[:, 0]))
+        clo, chi = _affine_enclosure(s, dec, c, c)
+        # centred (interval mean-value) form, docs/math/tasil.md section 3.9: per component,
+        # Delta_i(x) = Delta_i(c) + D Delta_i(z_i)(x - c) with z_i in the box, so
+        # |Delta_i(x)| <= |Delta_i(c)| + sum_j max|[D Delta](box)_ij| r_j
+        blo, bhi = _difference_jacobian_at(s, dec, B[:, 0], B[:, 1])
+        spread = matmul_bounds(np.maximum(np.abs(blo), np.abs(bhi)), r[:, None])[1][:, 0]
+        centred = add_up_np(np.maximum(np.abs(clo), np.abs(chi)), spread)
+        ub = min(ub, float(norm2_up_np(centred)))
         if not (math.isfinite(lip) or math.isfinite(l2)):
             return ub
-        clo, chi = _affine_enclosure(s, dec, c, c)
         if math.isfinite(lip):
             # first order: ||D(x)|| <= ||D(c)|| + Lip ||x - c||, D(c) enclosed at the point c
             at_c = float(norm2_up_np(np.maximum(np.abs(clo), np.abs(chi))))
