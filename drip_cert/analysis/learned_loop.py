@@ -56,10 +56,12 @@ from drip_cert.numerics.rounding import (
     add_up,
     add_up_np,
     matmul_bounds,
+    mul_down_np,
     mul_up,
     norm2_up_np,
     spectral_norm_upper,
     sub_down_np,
+    sum_down,
     up_np,
 )
 from drip_cert.provenance import GLOBAL, How, Quantity
@@ -334,8 +336,15 @@ def _difference_jacobian_at(
     return jlo, jhi
 
 
-def sup_policy_difference(s: System, box: np.ndarray) -> Quantity | None:
+def sup_policy_difference(
+    s: System, box: np.ndarray, ball: tuple[np.ndarray, float] | None = None
+) -> Quantity | None:
     """Sound upper bound of ``sup_{x in box} ||pi_IL(x) - pi*(x)||_2`` by branch and bound.
+
+    With ``ball = (c, r)`` the sup is over ``box cap {||x - c||_2 <= r}`` (docs/math/tasil.md
+    section 3.10): the search starts on ``box`` clipped to the ball's bounding box, and a sub-box
+    whose rounded-down distance to ``c`` exceeds ``r`` holds no point of the set (bound 0, as the
+    norm is >= 0).
 
     ``pi_IL - pi*`` must be affine in MLP blocks (shared blocks cancel first); each sub-box is
     enclosed by interval bound propagation through the networks and centre-radius products, the
@@ -358,7 +367,29 @@ def sup_policy_difference(s: System, box: np.ndarray) -> Quantity | None:
     if l2q is not None and math.isfinite(l2):
         lips = [*lips, l2q]
 
+    if ball is not None:
+        bc, br = np.asarray(ball[0], dtype=float), float(ball[1])
+        rad = np.full(bc.shape, br)
+        box = np.stack(
+            [
+                np.maximum(box[:, 0], sub_down_np(bc, rad)),
+                np.minimum(box[:, 1], add_up_np(bc, rad)),
+            ],
+            axis=1,
+        )
+        if np.any(box[:, 0] > box[:, 1]):
+            return _empty_sup(lips, box)
+
+    def outside(B: np.ndarray) -> bool:
+        """Whether the sub-box ``B`` provably misses the ball (distance rounded down)."""
+        if ball is None:
+            return False
+        gap = np.maximum(np.maximum(sub_down_np(B[:, 0], bc), sub_down_np(bc, B[:, 1])), 0.0)
+        return sum_down(mul_down_np(gap, gap).tolist()) > mul_up(br, br)
+
     def upper(B: np.ndarray) -> float:
+        if outside(B):
+            return 0.0
         lo, hi = _affine_enclosure(s, dec, B[:, 0], B[:, 1])
         ub = float(norm2_up_np(np.maximum(np.abs(lo), np.abs(hi))))
         c = 0.5 * B[:, 0] + 0.5 * B[:, 1]
@@ -388,6 +419,8 @@ def sup_policy_difference(s: System, box: np.ndarray) -> Quantity | None:
         return ub
 
     def value(x: np.ndarray) -> float:
+        if ball is not None and np.linalg.norm(x - bc) > br:
+            return 0.0  # a sample outside the set says nothing of its sup
         d = dec.A @ x + dec.c
         for name, C in dec.C.items():
             mlp = s.blocks[name].mlp
@@ -403,12 +436,25 @@ def sup_policy_difference(s: System, box: np.ndarray) -> Quantity | None:
         max_boxes=SUP_DIFF_MAX_BOXES,
         corners=True,
     )
+    where = box.tolist() if ball is None else f"{box.tolist()} cap B({bc.tolist()}, {br:.6g})"
     return Quantity.derive(
         "sup||pi_IL - pi*||",
         res.upper,
         inputs=lips,
         method=How.SOUND,
         source="interval branch and bound over the box (analysis/learned_loop.py)",
-        note=f"over {box.tolist()}: <= {res.upper:.6g} (sampled {res.lower:.6g}, "
+        note=f"over {where}: <= {res.upper:.6g} (sampled {res.lower:.6g}, "
         f"{res.n_boxes} boxes, stop {res.stop})",
+    )
+
+
+def _empty_sup(lips: list[Quantity], box: np.ndarray) -> Quantity:
+    """The sup over an empty set, bounded by 0 (the norm is >= 0)."""
+    return Quantity.derive(
+        "sup||pi_IL - pi*||",
+        0.0,
+        inputs=lips,
+        method=How.SOUND,
+        source="interval branch and bound over the box (analysis/learned_loop.py)",
+        note=f"over {box.tolist()} cap the ball: empty, 0 boxes",
     )
