@@ -27,6 +27,7 @@ import numpy as np
 
 from drip_cert.analysis.closed_loop import closed_loop_constants
 from drip_cert.bounds.l1drac.constants import L1Constants
+from drip_cert.bounds.l1drac.decomposition import L1Decomposition, decompose
 from drip_cert.bounds.l1drac.designer import TradeoffRow, design, tradeoff_table
 from drip_cert.bounds.l1drac.request import DesignRequest
 from drip_cert.bounds.l1drac.result import L1Design
@@ -47,6 +48,7 @@ class L1Section:
     design: L1Design | None
     error: str = ""
     tradeoff: tuple[TradeoffRow, ...] = ()  #: rows at the design's omega and lambda_s
+    decomposition: L1Decomposition | None = None  #: rho_L1 term by term (decomposition.py)
 
     @property
     def feasible(self) -> bool:
@@ -60,6 +62,7 @@ class L1Section:
         out["tradeoff"] = [
             {"rho_a": r.rho_a, "Ts_max": r.Ts_max, "rho": r.rho} for r in self.tradeoff
         ]
+        out["decomposition"] = None if self.decomposition is None else self.decomposition.to_dict()
         return out
 
 
@@ -193,4 +196,4 @@ def l1_section(
     # a feasible design has omega and lambda_s (condition (24) was verified)
     if d.feasible and d.omega is not None and d.lambda_s is not None:
         rows = tradeoff_table(consts, d.p, d.omega, d.lambda_s)
-    return L1Section(q, d, tradeoff=rows)
+    return L1Section(q, d, tradeoff=rows, decomposition=decompose(consts, d))
