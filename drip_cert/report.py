@@ -245,15 +245,17 @@ def _l1_objective_lines(rep: dict[str, Any]) -> list[str]:
 
 def _validation_table(checks: list[dict[str, Any]]) -> list[str]:
     lines = [
-        "| check | kind | bound | empirical | confidence bound | ratio bound/empirical | status |",
-        "|---|---|---|---|---|---|---|",
+        "| check | kind | bound | empirical | confidence bound | ratio bound/empirical "
+        "| ratio bound/upper confidence | status |",
+        "|---|---|---|---|---|---|---|---|",
     ]
     for c in checks:
         status = c.get("status", "holds" if c.get("holds") else "violated")
         lines.append(
             f"| {c['name']} | {c.get('kind', '')} | {_f(c.get('bound'))} | "
             f"{_f(c.get('empirical'))} | {_f(c.get('confidence_low'))} | "
-            f"{_f(c.get('ratio'))} | {status.upper() if status == 'violated' else status} |"
+            f"{_f(c.get('ratio'))} | {_f(c.get('ratio_at_confidence'))} | "
+            f"{status.upper() if status == 'violated' else status} |"
         )
     lines.append("")
     for c in checks:
