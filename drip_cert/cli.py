@@ -26,7 +26,7 @@ from typing import Any
 from drip_cert.bounds.l1drac.toml import design_l1_report
 from drip_cert.diff import DEFAULT_RTOL, diff_files, diff_text
 from drip_cert.errors import AssumptionViolation, DripCertError, FingerprintError, SpecError
-from drip_cert.figures_l1 import l1_front_figure
+from drip_cert.figures_l1 import l1_front_figure, l1_terms_figure
 from drip_cert.numerics.atomic_io import jsonable
 from drip_cert.numerics.user_files import input_file, output_dir, output_file
 from drip_cert.report import certificate_markdown, l1_design_text, train_text, validation_text
@@ -95,6 +95,9 @@ def cmd_design_l1(args: argparse.Namespace) -> int:
     report = design_l1_report(args.constants, Ts=args.Ts, rho_budget=args.rho_budget)
     if args.figure:
         report["figure"] = str(l1_front_figure(report, args.figure))
+        fig = Path(args.figure)
+        terms = fig.with_name(f"{fig.stem}_terms{fig.suffix}")
+        report["figure_terms"] = str(l1_terms_figure(report, terms))
     if args.json:
         _print_json(report)
     else:

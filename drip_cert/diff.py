@@ -61,7 +61,9 @@ with ``certificate.``):
 
 For validation reports also: ``status`` (``holds`` to anything else, or ``nothing_checked`` to
 ``violated``, is a regression), each check by ``name`` (``holds`` to ``violated`` or
-``not_checked`` is a regression), and ``at_certified_parameters`` (``true`` to ``false`` is a
+``not_checked`` is a regression; of a check that holds in both, a ``ratio`` ``bound / empirical``
+grown beyond the tolerance is a regression -- a looser certificate, even one that still holds --
+and shrunk an improvement), and ``at_certified_parameters`` (``true`` to ``false`` is a
 regression: the run no longer validates the certificate).
 
 Timings are never compared: the top-level key ``timings`` of either layout and every key that
@@ -876,7 +878,7 @@ def _without_timings(node: Any) -> Any:
     return node
 
 
-def _validation(old: Mapping, new: Mapping) -> list[Change]:
+def _validation(old: Mapping, new: Mapping, rtol: float = DEFAULT_RTOL) -> list[Change]:
     out = []
     a, b = old.get("status"), new.get("status")
     if a != b:
@@ -927,7 +929,30 @@ def _validation(old: Mapping, new: Mapping) -> list[Change]:
                 + (f" ({reason})" if reason else ""),
             )
         )
+    for name in [n for n in co if n in cn]:
+        ch = _ratio_change(name, co[name], cn[name], rtol)
+        if ch is not None:
+            out.append(ch)
     return out
+
+
+def _ratio_change(name: str, a: Mapping, b: Mapping, rtol: float) -> Change | None:
+    """``bound / empirical`` of a check that holds in both reports: grown beyond ``rtol`` is a
+    regression (a looser certificate, even one that still holds), shrunk an improvement."""
+    if a.get("status") != "holds" or b.get("status") != "holds":
+        return None
+    ra, rb = _num(a.get("ratio")), _num(b.get("ratio"))
+    if ra is None or rb is None or not _differ(ra, rb, rtol):
+        return None
+    return Change(
+        "tightness",
+        f"checks[{name}].ratio",
+        ra,
+        rb,
+        REGRESSION if rb > ra else IMPROVEMENT,
+        f"check {name}: bound / empirical {_fmt(ra)} -> {_fmt(rb)}{_rel(ra, rb)}"
+        + (" (looser)" if rb > ra else " (tighter)"),
+    )
 
 
 # ------------------------------------------------------------------------- public API
@@ -955,7 +980,7 @@ def diff_outputs(old: LoadedOutput, new: LoadedOutput, *, rtol: float = DEFAULT_
     if so != sn:
         notes.append(f"different systems: {so!r} (old) and {sn!r} (new)")
     if old.kind == "validation":
-        changes = _validation(od, nd) + _certificate(oc, nc, rtol, pre="certificate.")
+        changes = _validation(od, nd, rtol) + _certificate(oc, nc, rtol, pre="certificate.")
     else:
         changes = _certificate(od, nd, rtol)
     return DiffResult(

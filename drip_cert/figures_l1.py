@@ -14,7 +14,7 @@ from typing import Any
 
 from drip_cert.bounds.l1drac.result import KNIFE_EDGE_TS_MIN, L1Design
 
-__all__ = ["l1_front_figure"]
+__all__ = ["l1_front_figure", "l1_terms_figure"]
 
 #: The x axis starts this factor below KNIFE_EDGE_TS_MIN; designs with a smaller T_s are drawn at
 #: its left edge with their T_s written beside them (else one knife edge at 1e-56 s squeezes
@@ -117,6 +117,98 @@ def l1_front_figure(design: L1Design | Mapping[str, Any], path: str | Path) -> P
     ax.set_title(title)
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=8, loc="upper left")
+    fig.tight_layout()
+    out = Path(path)
+    fig.savefig(out)
+    plt.close(fig)
+    return out
+
+
+def l1_terms_figure(design: L1Design | Mapping[str, Any], path: str | Path) -> Path:
+    """Write rho_L1 term by term to ``path``: stacked bars and rho_L1(T_s) with rho_L1(0).
+
+    Parameters
+    ----------
+    design
+        A report with ``decomposition`` (:func:`~drip_cert.bounds.l1drac.decomposition.decompose`,
+        the ``design-l1`` JSON or a certificate's ``l1drac`` part) and ``front``.
+    path
+        Output file; its suffix picks the format.
+
+    Returns
+    -------
+    Path
+        ``path``. Left: for ``rho_r`` and ``rho_a``, one stacked bar of the shares of
+        ``(1 - k) rho^2`` each term of the binding condition takes (docs/math/l1drac.md section
+        5.5). Right: the verified front's ``rho_L1(T_s)`` (log-log), the returned design and the
+        ``T_s -> 0`` end ``rho_L1(0)`` (dashed). A report without a decomposition gives a figure
+        that says so.
+    """
+    import matplotlib  # matplotlib: keep off the CLI start-up path
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt  # matplotlib: keep off the CLI start-up path
+
+    rep = design.to_dict() if isinstance(design, L1Design) else dict(design)
+    dec = rep.get("decomposition")
+    fig, (ax, bx) = plt.subplots(1, 2, figsize=(12.0, 5.6))
+    if not dec:
+        ax.set_title("no decomposition (no feasible design)")
+    else:
+        cmap = plt.get_cmap("tab20")
+        names: list[str] = []
+        for i, key in enumerate(("rho_r", "rho_a")):
+            left = 0.0
+            for term in dec[key]["terms"]:
+                if not term["share"] > 0:
+                    continue
+                if term["name"] not in names:
+                    names.append(term["name"])
+                j = names.index(term["name"])
+                ax.barh(i, term["share"], left=left, color=cmap(j % 20), label=term["name"])
+                left += term["share"]
+        ax.set_yticks(
+            [0, 1], [f"rho_r = {dec['rho_r']['value']:.4g}", f"rho_a = {dec['rho_a']['value']:.4g}"]
+        )
+        ax.set_xlim(0, 1.0)
+        ax.set_xlabel("share of (1 - k) rho^2 (binding condition)")
+        ax.set_title(f"rho_L1 term by term at T_s = {dec['Ts']:.3g} s")
+        handles, labels = ax.get_legend_handles_labels()
+        uniq = dict(zip(labels, handles, strict=True))
+        ax.legend(
+            uniq.values(),
+            uniq.keys(),
+            fontsize=6,
+            loc="upper center",
+            bbox_to_anchor=(0.5, -0.16),
+            ncol=2,
+        )
+    front = [p for p in rep.get("front") or [] if isinstance(p.get("Ts"), float | int)]
+    ok = [p for p in front if p["Ts"] >= KNIFE_EDGE_TS_MIN]
+    if ok:
+        bx.plot(
+            [p["Ts"] for p in ok],
+            [p["rho"] for p in ok],
+            "o-",
+            color="tab:blue",
+            label="rho_L1(T_s), verified front",
+        )
+    if dec and dec.get("rho_Ts0") is not None:
+        bx.axhline(
+            dec["rho_Ts0"],
+            color="tab:red",
+            ls="--",
+            label=f"rho_L1(T_s -> 0) = {dec['rho_Ts0']:.4g}",
+        )
+    if rep.get("feasible") and rep.get("Ts") and rep.get("rho"):
+        bx.plot([rep["Ts"]], [rep["rho"]], "*", color="tab:orange", ms=14, label="returned design")
+    bx.set_xscale("log")
+    bx.set_yscale("log")
+    bx.set_xlabel("sampling period T_s [s]")
+    bx.set_ylabel("rho_L1")
+    bx.grid(True, which="both", alpha=0.3)
+    if bx.get_legend_handles_labels()[0]:
+        bx.legend(fontsize=8, loc="upper left")
     fig.tight_layout()
     out = Path(path)
     fig.savefig(out)

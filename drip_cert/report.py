@@ -179,7 +179,35 @@ def l1_design_text(rep: dict[str, Any]) -> str:
     if rep.get("reason"):
         lines += ["", f"reason: {rep['reason']}"]
     lines += _l1_objective_lines(rep)
+    lines += _l1_decomposition_lines(rep.get("decomposition"))
     return "\n".join(lines)
+
+
+def _l1_decomposition_lines(dec: dict[str, Any] | None) -> list[str]:
+    """rho_L1 term by term (``decomposition``, docs/math/l1drac.md section 5.5): each radius's
+    terms with their share of ``(1 - k) rho^2``, largest first (terms of zero value left out)."""
+    if not dec:
+        return []
+    b = dec["binding"]
+    lines = [
+        "",
+        f"rho_L1 term by term at T_s = {_f(dec['Ts'])}: binding term {b['name']} (({b['radius']}), "
+        f"{100 * b['share']:.1f} % of (1 - k_a) rho_a^2); sampled-data terms (24): "
+        f"{100 * dec['sampling_share']:.1f} %; rho_L1(T_s -> 0) = {_f(dec['rho_Ts0'])} "
+        f"(front), rho_L1(T_s) = {_f(dec['rho'])}",
+        "",
+        "| radius | term | eq | share of (1-k) rho^2 | T_s power | what |",
+        "|---|---|---|---|---|---|",
+    ]
+    for key in ("rho_r", "rho_a"):
+        for term in dec[key]["terms"]:
+            if term["value"] == 0:
+                continue
+            lines.append(
+                f"| {key} = {_f(dec[key]['value'])} | {term['name']} | ({term['condition']}) | "
+                f"{100 * term['share']:.3g} % | {term['ts_power']} | {term['what']} |"
+            )
+    return lines
 
 
 def _l1_objective_lines(rep: dict[str, Any]) -> list[str]:
@@ -217,15 +245,17 @@ def _l1_objective_lines(rep: dict[str, Any]) -> list[str]:
 
 def _validation_table(checks: list[dict[str, Any]]) -> list[str]:
     lines = [
-        "| check | kind | bound | empirical | confidence bound | ratio bound/empirical | status |",
-        "|---|---|---|---|---|---|---|",
+        "| check | kind | bound | empirical | confidence bound | ratio bound/empirical "
+        "| ratio bound/upper confidence | status |",
+        "|---|---|---|---|---|---|---|---|",
     ]
     for c in checks:
         status = c.get("status", "holds" if c.get("holds") else "violated")
         lines.append(
             f"| {c['name']} | {c.get('kind', '')} | {_f(c.get('bound'))} | "
             f"{_f(c.get('empirical'))} | {_f(c.get('confidence_low'))} | "
-            f"{_f(c.get('ratio'))} | {status.upper() if status == 'violated' else status} |"
+            f"{_f(c.get('ratio'))} | {_f(c.get('ratio_at_confidence'))} | "
+            f"{status.upper() if status == 'violated' else status} |"
         )
     lines.append("")
     for c in checks:

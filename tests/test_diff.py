@@ -165,6 +165,21 @@ def test_validation_rules(validation):
     assert _only(_diff(validation, new), "verdict", REGRESSION).key == "certificate.verdict"
 
 
+def test_a_looser_ratio_is_a_regression_even_when_the_check_holds(validation):
+    """Issue 25: bound / empirical grown beyond rtol (the check still holds) is a regression,
+    shrunk an improvement, and a change within rtol is no change."""
+    new = copy.deepcopy(validation)
+    held = next(c for c in new["checks"] if c["status"] == "holds" and c.get("ratio"))
+    held["ratio"] = held["ratio"] * 2.0
+    c = _only(_diff(validation, new), "tightness", REGRESSION)
+    assert c.key == f"checks[{held['name']}].ratio" and "looser" in c.text
+    _only(_diff(new, validation), "tightness", IMPROVEMENT)
+    same = copy.deepcopy(validation)
+    held = next(c for c in same["checks"] if c["name"] == held["name"])
+    held["ratio"] = held["ratio"] * (1.0 + 1e-12)
+    assert not _diff(validation, same).changes
+
+
 # ------------------------------------------------------- claims, not headline numbers (issue 22)
 # The names added with these rules (constant_direction, is_timing_key) are imported inside the
 # tests that use them, so that every test below also runs, and fails, against the diff of 8844af7.

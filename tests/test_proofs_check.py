@@ -157,3 +157,28 @@ def test_sde_moment_bound_holds_on_a_simulated_nonlinear_sde():
     assert check_simulated(_ctx("sde.simulated_nonlinear")).verdict is Verdict.PASS
     res = check_simulated(_ctx("sde.simulated_nonlinear"), ignore_diffusion=True)
     assert res.verdict is Verdict.FAIL and res.residual > 0
+
+
+#: a tight instance attains its bound to the ODE / grid accuracy (docs of proofs_check.tasil_tube)
+ATTAINED = 1e-6
+
+
+@pytest.mark.parametrize(
+    "name, fn",
+    [
+        ("tasil.comparison_finite_horizon", "check_finite_horizon"),
+        ("tasil.tube_radius", "check_tube_radius"),
+        ("tasil.tube_gap", "check_tube_gap"),
+        ("tasil.centred_form", "check_centred_form"),
+    ],
+)
+def test_tube_checks_hold_attain_and_fail_on_a_smaller_bound(name, fn):
+    """docs/math/tasil.md 3.7 (finite horizon), 3.9, 3.10: each bound holds, is attained on the
+    tight instances, and fails when taken 0.99 times too small."""
+    import proofs_check.tasil_tube as tt
+
+    check = getattr(tt, fn)
+    ok = check(_ctx(name))
+    assert ok.verdict is Verdict.PASS and ok.residual > -ATTAINED, ok.detail
+    res = check(_ctx(name), factor=0.99)
+    assert res.verdict is Verdict.FAIL and res.residual > 0

@@ -28,6 +28,7 @@ from drip_cert.validate.checks import (
     NOT_CHECKED,
     NOTHING_CHECKED,
     VIOLATED,
+    EmpiricalCheck,
     check_mean,
     check_radius,
     check_tail,
@@ -339,3 +340,19 @@ def test_cli_validate_exit_status_matches_report_status(capsys, tmp_path):
     # the policy radius needs no L1-DRAC design: it is checked, against a finite radius
     radius = next(c for c in rep["checks"] if c["name"] == "policy_radius")
     assert radius["status"] in (HOLDS, VIOLATED) and radius["bound"] is not None
+
+
+def test_every_check_reports_its_ratio_at_confidence():
+    """Issue 25: next to bound / empirical, bound / (the statistic's upper confidence bound), the
+    tightness one can claim at the check's level; None when either is missing."""
+    c = EmpiricalCheck(
+        name="x", kind="radius", what="", bound=8.0, empirical=2.0, confidence_low=1.5,
+        confidence_high=4.0, level=0.95, status="holds", reason=None, note="",
+    )  # fmt: skip
+    d = c.to_dict()
+    assert d["ratio"] == 4.0 and d["ratio_at_confidence"] == 2.0
+    none = EmpiricalCheck(
+        name="y", kind="radius", what="", bound=8.0, empirical=2.0, confidence_low=1.5,
+        confidence_high=None, level=0.95, status="holds", reason=None, note="",
+    )  # fmt: skip
+    assert none.to_dict()["ratio_at_confidence"] is None

@@ -46,7 +46,12 @@ import sympy as sp
 from drip_cert.analysis.closed_loop import CONVERSION_ULPS, AffineBlocks, affine_in_blocks
 from drip_cert.analysis.contraction import ContractionResult
 from drip_cert.analysis.lognorm import mu2_constant_bounds
-from drip_cert.analysis.mlp import enclose_jacobian, enclose_output, lipschitz_bound
+from drip_cert.analysis.mlp import (
+    enclose_jacobian,
+    enclose_jacobian_centred,
+    enclose_output,
+    lipschitz_bound,
+)
 from drip_cert.analysis.policy_regularity import difference_jacobian_lipschitz
 from drip_cert.model.system import System
 from drip_cert.numerics.bnb import maximize
@@ -55,10 +60,12 @@ from drip_cert.numerics.rounding import (
     add_up,
     add_up_np,
     matmul_bounds,
+    mul_down_np,
     mul_up,
     norm2_up_np,
     spectral_norm_upper,
     sub_down_np,
+    sum_down,
     up_np,
 )
 from drip_cert.provenance import GLOBAL, How, Quantity
@@ -304,15 +311,22 @@ def _affine_enclosure(s: System, dec: AffineBlocks, lo: np.ndarray, hi: np.ndarr
     return olo, ohi
 
 
-def _difference_jacobian_at(s: System, dec: AffineBlocks, c: np.ndarray):
-    """Rigorous ``(lo, hi)`` of ``D Delta(c) = A + sum_k C_k Dh_k(c)`` at the point ``c``."""
+def _difference_jacobian_at(
+    s: System, dec: AffineBlocks, c: np.ndarray, hi: np.ndarray | None = None
+):
+    """Rigorous ``(lo, hi)`` of ``D Delta(x) = A + sum_k C_k Dh_k(x)`` at the point ``c`` or, with
+    ``hi``, for every ``x`` in the box ``[c, hi]`` (each network's Jacobian enclosed by
+    :func:`~drip_cert.analysis.mlp.enclose_jacobian_centred` there)."""
     A = np.asarray(dec.A, dtype=float)
     ra = CONVERSION_ULPS * np.spacing(np.abs(A))
     jlo, jhi = sub_down_np(A, ra), add_up_np(A, ra)
     for name, C in dec.C.items():
         mlp = s.blocks[name].mlp
         assert mlp is not None
-        hlo, hhi = enclose_jacobian(mlp, c, c)
+        if hi is None:
+            hlo, hhi = enclose_jacobian(mlp, c, c)
+        else:
+            hlo, hhi = enclose_jacobian_centred(mlp, c, hi)
         m = 0.5 * hlo + 0.5 * hhi
         rr = up_np(np.maximum(hhi - m, m - hlo))
         plo, phi = matmul_bounds(C, m)
@@ -326,12 +340,21 @@ def _difference_jacobian_at(s: System, dec: AffineBlocks, c: np.ndarray):
     return jlo, jhi
 
 
-def sup_policy_difference(s: System, box: np.ndarray) -> Quantity | None:
+def sup_policy_difference(
+    s: System, box: np.ndarray, ball: tuple[np.ndarray, float] | None = None
+) -> Quantity | None:
     """Sound upper bound of ``sup_{x in box} ||pi_IL(x) - pi*(x)||_2`` by branch and bound.
+
+    With ``ball = (c, r)`` the sup is over ``box cap {||x - c||_2 <= r}`` (docs/math/tasil.md
+    section 3.10): the search starts on ``box`` clipped to the ball's bounding box, and a sub-box
+    whose rounded-down distance to ``c`` exceeds ``r`` holds no point of the set (bound 0, as the
+    norm is >= 0).
 
     ``pi_IL - pi*`` must be affine in MLP blocks (shared blocks cancel first); each sub-box is
     enclosed by interval bound propagation through the networks and centre-radius products, the
-    norm of the enclosure rounded up. ``None`` when the difference has another form.
+    norm of the enclosure rounded up; the smallest of that, the first- and second-order forms
+    around the box centre and the centred form with the box's interval Jacobian (docs/math/tasil.md
+    section 3.9) bounds the sub-box. ``None`` when the difference has another form.
     """
     if s.learned is None:
         return None
@@ -348,14 +371,43 @@ def sup_policy_difference(s: System, box: np.ndarray) -> Quantity | None:
     if l2q is not None and math.isfinite(l2):
         lips = [*lips, l2q]
 
+    if ball is not None:
+        bc, br = np.asarray(ball[0], dtype=float), float(ball[1])
+        rad = np.full(bc.shape, br)
+        box = np.stack(
+            [
+                np.maximum(box[:, 0], sub_down_np(bc, rad)),
+                np.minimum(box[:, 1], add_up_np(bc, rad)),
+            ],
+            axis=1,
+        )
+        if np.any(box[:, 0] > box[:, 1]):
+            return _empty_sup(lips, box)
+
+    def outside(B: np.ndarray) -> bool:
+        """Whether the sub-box ``B`` provably misses the ball (distance rounded down)."""
+        if ball is None:
+            return False
+        gap = np.maximum(np.maximum(sub_down_np(B[:, 0], bc), sub_down_np(bc, B[:, 1])), 0.0)
+        return sum_down(mul_down_np(gap, gap).tolist()) > mul_up(br, br)
+
     def upper(B: np.ndarray) -> float:
+        if outside(B):
+            return 0.0
         lo, hi = _affine_enclosure(s, dec, B[:, 0], B[:, 1])
         ub = float(norm2_up_np(np.maximum(np.abs(lo), np.abs(hi))))
         c = 0.5 * B[:, 0] + 0.5 * B[:, 1]
         r = up_np(np.maximum(B[:, 1] - c, c - B[:, 0]))
+        clo, chi = _affine_enclosure(s, dec, c, c)
+        # centred (interval mean-value) form, docs/math/tasil.md section 3.9: per component,
+        # Delta_i(x) = Delta_i(c) + D Delta_i(z_i)(x - c) with z_i in the box, so
+        # |Delta_i(x)| <= |Delta_i(c)| + sum_j max|[D Delta](box)_ij| r_j
+        blo, bhi = _difference_jacobian_at(s, dec, B[:, 0], B[:, 1])
+        spread = matmul_bounds(np.maximum(np.abs(blo), np.abs(bhi)), r[:, None])[1][:, 0]
+        centred = add_up_np(np.maximum(np.abs(clo), np.abs(chi)), spread)
+        ub = min(ub, float(norm2_up_np(centred)))
         if not (math.isfinite(lip) or math.isfinite(l2)):
             return ub
-        clo, chi = _affine_enclosure(s, dec, c, c)
         if math.isfinite(lip):
             # first order: ||D(x)|| <= ||D(c)|| + Lip ||x - c||, D(c) enclosed at the point c
             at_c = float(norm2_up_np(np.maximum(np.abs(clo), np.abs(chi))))
@@ -371,6 +423,8 @@ def sup_policy_difference(s: System, box: np.ndarray) -> Quantity | None:
         return ub
 
     def value(x: np.ndarray) -> float:
+        if ball is not None and np.linalg.norm(x - bc) > br:
+            return 0.0  # a sample outside the set says nothing of its sup
         d = dec.A @ x + dec.c
         for name, C in dec.C.items():
             mlp = s.blocks[name].mlp
@@ -386,12 +440,25 @@ def sup_policy_difference(s: System, box: np.ndarray) -> Quantity | None:
         max_boxes=SUP_DIFF_MAX_BOXES,
         corners=True,
     )
+    where = box.tolist() if ball is None else f"{box.tolist()} cap B({bc.tolist()}, {br:.6g})"
     return Quantity.derive(
         "sup||pi_IL - pi*||",
         res.upper,
         inputs=lips,
         method=How.SOUND,
         source="interval branch and bound over the box (analysis/learned_loop.py)",
-        note=f"over {box.tolist()}: <= {res.upper:.6g} (sampled {res.lower:.6g}, "
+        note=f"over {where}: <= {res.upper:.6g} (sampled {res.lower:.6g}, "
         f"{res.n_boxes} boxes, stop {res.stop})",
+    )
+
+
+def _empty_sup(lips: list[Quantity], box: np.ndarray) -> Quantity:
+    """The sup over an empty set, bounded by 0 (the norm is >= 0)."""
+    return Quantity.derive(
+        "sup||pi_IL - pi*||",
+        0.0,
+        inputs=lips,
+        method=How.SOUND,
+        source="interval branch and bound over the box (analysis/learned_loop.py)",
+        note=f"over {box.tolist()} cap the ball: empty, 0 boxes",
     )

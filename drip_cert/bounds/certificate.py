@@ -34,6 +34,7 @@ from drip_cert.analysis.iss import delta_iss
 from drip_cert.analysis.learned_loop import best_global_rate, sup_policy_difference
 from drip_cert.analysis.mlp_loop import system_mlps
 from drip_cert.bounds.l1drac.system import l1_section
+from drip_cert.bounds.tasil.tube import expert_tube_bound, horizon_factor_up
 from drip_cert.errors import AssumptionViolation, DripCertError
 from drip_cert.model.fingerprint import Fingerprint, fingerprint_of
 from drip_cert.model.system import System, box_image
@@ -828,12 +829,16 @@ def _certify_in(spec: Spec, demonstrations: DemonstrationSet | None, stage: Stag
                     "gamma_IL",
                     ic.Delta_g_spectral,
                     lam_il.renamed("lambda_learned"),
-                    "comparison bound of the learned loop (docs/math/tasil.md section 3.7)",
+                    "comparison bound of the learned loop on [0, T] (docs/math/tasil.md 3.7)",
+                    horizon=s.horizon,
                 )
-        uniform_h0 = None
+        uniform_h0 = tube = None
         if cmp_gain is not None:
             stage("sup of ||pi_IL - pi*|| over a set holding every expert trajectory")
-            uniform_h0 = _uniform_h0(s, r, inv, notes)
+            uniform_h0, S_inv = _uniform_h0(s, r, inv, notes)
+            if cl is not None:
+                stage("the same sup along the expert's contraction tube (TaSIL section 3.10)")
+                tube = expert_tube_bound(s, S_inv, r, cl.euclidean, ic.Delta_g_spectral, uniform_h0)
         tasil, tasil_prov, tq = tasil_section(
             s,
             train,
@@ -845,6 +850,7 @@ def _certify_in(spec: Spec, demonstrations: DemonstrationSet | None, stage: Stag
             method=f"{st.method}-{st.order}",
             comparison_gain=cmp_gain,
             uniform_h0=uniform_h0,
+            tube=tube,
         )
         extra_q.extend(q for q in tq if q.name != "gamma0")
     if tasil is not None:
@@ -982,11 +988,13 @@ def _learned_contraction(
     return analyse_contraction(s, "learned", opts)
 
 
-def _uniform_h0(s: System, r: Any, inv: InvariantSet | None, notes: list[str]) -> Quantity | None:
+def _uniform_h0(
+    s: System, r: Any, inv: InvariantSet | None, notes: list[str]
+) -> tuple[Quantity | None, np.ndarray | None]:
     """``sup_{x in S} ||pi_IL(x) - pi*(x)||`` (sound) over a box ``S`` proved to hold every
     expert trajectory from the support on ``[0, T]``: the support itself when it is forward
     invariant (Nagumo), else the box around a proved invariant ball; ``None`` when neither is
-    proved or the difference is not affine in MLP blocks."""
+    proved or the difference is not affine in MLP blocks. Also returns ``S``."""
     support = np.asarray(s.support, dtype=float)
     enclose = block_enclose_callback(s.blocks) if s.blocks else None
     S = None
@@ -1001,11 +1009,11 @@ def _uniform_h0(s: System, r: Any, inv: InvariantSet | None, notes: list[str]) -
         S = np.stack([c - inv.radius, c + inv.radius], axis=1)
         why = f"the box around the expert's invariant ball (radius {inv.radius:.4g})"
     if S is None:
-        return None
+        return None, None
     q = sup_policy_difference(s, S)
     if q is not None:
         notes.append(f"sup ||pi_IL - pi*|| over {why}: {q.note}")
-    return q
+    return q, S
 
 
 def _nan_max(a: float, b: float) -> float:
@@ -1036,15 +1044,20 @@ def _expert_scope(r: Any, inv: InvariantSet | None, horizon: float) -> tuple[boo
     )
 
 
-def _input_gain(name: str, g_norm: Quantity, lam: Quantity, source: str) -> Quantity:
+def _input_gain(
+    name: str, g_norm: Quantity, lam: Quantity, source: str, horizon: float | None = None
+) -> Quantity:
     """``sup||g||_2 / lambda`` rounded up: the gain from an input-space disturbance to the state
-    gap of a loop contracting at ``lambda`` (the comparison lemma); labelled from its inputs."""
+    gap of a loop contracting at ``lambda`` (the comparison lemma); labelled from its inputs.
+    With ``horizon`` T: ``sup||g||_2 (1 - e^{-lambda T}) / lambda``, the gain on ``[0, T]``
+    (docs/math/tasil.md section 3.7)."""
+    if horizon is None:
+        value, how = div_up(g_norm.value, lam.value), f"sup||g||_2 / {lam.name}"
+    else:
+        value = mul_up(g_norm.value, horizon_factor_up(lam.value, horizon))
+        how = f"sup||g||_2 (1 - e^(-{lam.name} T)) / {lam.name}, T = {horizon:g}"
     return Quantity.derive(
-        name,
-        div_up(g_norm.value, lam.value),
-        inputs=[g_norm, lam],
-        source=source,
-        note=f"sup||g||_2 / {lam.name}, rounded up",
+        name, value, inputs=[g_norm, lam], source=source, note=f"{how}, rounded up"
     )
 
 

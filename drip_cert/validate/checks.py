@@ -128,8 +128,16 @@ class EmpiricalCheck:
         """``bound / empirical`` when both are finite (``inf`` for an empirical zero)."""
         return _ratio(self.bound, self.empirical)
 
+    @property
+    def ratio_at_confidence(self) -> float | None:
+        """``bound / confidence_high``: the bound's ratio to the statistic's one-sided upper
+        confidence bound, the tightness one can claim at ``level`` (``ratio`` is the point
+        estimate's)."""
+        return _ratio(self.bound, self.confidence_high)
+
     def to_dict(self) -> dict[str, Any]:
-        """JSON-ready: the fields, ``ratio`` and ``holds``, then the kind's own keys."""
+        """JSON-ready: the fields, ``ratio``, ``ratio_at_confidence`` and ``holds``, then the
+        kind's own keys."""
         return {
             "name": self.name,
             "kind": self.kind,
@@ -140,6 +148,7 @@ class EmpiricalCheck:
             "confidence_high": self.confidence_high,
             "level": self.level,
             "ratio": self.ratio,
+            "ratio_at_confidence": self.ratio_at_confidence,
             "status": self.status,
             "holds": self.holds,
             "reason": self.reason,

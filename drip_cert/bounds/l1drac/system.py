@@ -27,6 +27,7 @@ import numpy as np
 
 from drip_cert.analysis.closed_loop import closed_loop_constants
 from drip_cert.bounds.l1drac.constants import L1Constants
+from drip_cert.bounds.l1drac.decomposition import L1Decomposition, decompose
 from drip_cert.bounds.l1drac.designer import TradeoffRow, design, tradeoff_table
 from drip_cert.bounds.l1drac.request import DesignRequest
 from drip_cert.bounds.l1drac.result import L1Design
@@ -50,6 +51,7 @@ class L1Section:
     #: ``sup_t ||X*_t - x'_t||_{L_2p}`` with a known diffusion (``None`` without one): the third
     #: term of ``rho`` (docs/math/contraction.md Proposition 6.6)
     rho_sde: Quantity | None = None
+    decomposition: L1Decomposition | None = None  #: rho_L1 term by term (decomposition.py)
 
     @property
     def feasible(self) -> bool:
@@ -64,6 +66,7 @@ class L1Section:
         out["tradeoff"] = [
             {"rho_a": r.rho_a, "Ts_max": r.Ts_max, "rho": r.rho} for r in self.tradeoff
         ]
+        out["decomposition"] = None if self.decomposition is None else self.decomposition.to_dict()
         return out
 
 
@@ -204,4 +207,4 @@ def l1_section(
     # a feasible design has omega and lambda_s (condition (24) was verified)
     if d.feasible and d.omega is not None and d.lambda_s is not None:
         rows = tradeoff_table(consts, d.p, d.omega, d.lambda_s)
-    return L1Section(q, d, tradeoff=rows, rho_sde=cl.rho_sde)
+    return L1Section(q, d, tradeoff=rows, rho_sde=cl.rho_sde, decomposition=decompose(consts, d))

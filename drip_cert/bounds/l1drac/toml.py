@@ -45,6 +45,7 @@ from types import MappingProxyType
 from typing import Any
 
 from drip_cert.bounds.l1drac.constants import L1Constants
+from drip_cert.bounds.l1drac.decomposition import decompose
 from drip_cert.bounds.l1drac.designer import design
 from drip_cert.bounds.l1drac.request import DesignRequest
 from drip_cert.errors import SpecError
@@ -177,7 +178,8 @@ def design_l1_report(
     decides the exit status: 0 if true, 1 if false; it is true only when every condition is
     verified in Arb ball arithmetic, see ``verified``, ``backoff`` and each condition's
     ``margin_lo`` / ``margin_hi``; ``objective``, ``choice``, ``knife_edge`` and ``front`` say
-    what was optimised, why this point, and the (Ts, rho) Pareto front) plus ``file``,
+    what was optimised, why this point, and the (Ts, rho) Pareto front) plus ``decomposition``
+    (rho_L1 term by term, :mod:`~drip_cert.bounds.l1drac.decomposition`), ``file``,
     ``constants`` and ``request``. ``Ts`` and ``rho_budget`` (the CLI's ``--Ts`` and
     ``--rho-budget``) replace the file's values; the objective is then re-inferred unless the
     file names one. Bad input raises SpecError (exit 2).
@@ -193,6 +195,8 @@ def design_l1_report(
         req = dataclasses.replace(req, objective=explicit, **changes)
     d = design(consts, req)
     out = d.to_dict()
+    dec = decompose(consts, d)
+    out["decomposition"] = None if dec is None else dec.to_dict()
     out["file"] = str(path)
     out["constants"] = consts.to_dict()
     out["request"] = {

@@ -41,6 +41,7 @@ from drip_cert.bounds.tasil.forms import (
     form_threshold,
 )
 from drip_cert.bounds.tasil.lemma import eps_star, imitation_gap_lemma
+from drip_cert.bounds.tasil.tube import TubeBound
 from drip_cert.errors import SpecError
 from drip_cert.provenance import Check, json_float
 
@@ -91,7 +92,10 @@ class TasilCertificate:
         ``sup||g||_2 / lambda_IL`` when the learned closed loop is proved to contract on all of
         ``R^n`` (the comparison bound ``gap <= comparison_gain * h_0``, docs/math/tasil.md
         section 3.7), else ``None``; ``gap_route`` says which bound gave ``gap_bound``
-        (``"lemma"`` or ``"comparison"``).
+        (``"lemma"``, ``"comparison"`` or ``"uniform"``).
+    tube
+        The time-resolved sure bound along the expert's tube (docs/math/tasil.md section 3.10),
+        ``rho_TaSIL(t)`` on its grid, or ``None`` when not computed.
     label, assumptions
         :data:`LABEL` and :data:`ASSUMPTIONS`.
     """
@@ -118,6 +122,7 @@ class TasilCertificate:
     gap_checks: tuple[Check, ...] = ()
     comparison_gain: float | None = None
     gap_route: str = "lemma"
+    tube: TubeBound | None = None
     label: str = LABEL
     assumptions: tuple[str, ...] = field(default=ASSUMPTIONS)
 
@@ -162,6 +167,7 @@ class TasilCertificate:
             if self.comparison_gain is None
             else json_float(self.comparison_gain),
             "gap_route": self.gap_route,
+            "tube": None if self.tube is None else self.tube.to_dict(),
             "assumptions": list(self.assumptions),
         }
 
@@ -203,6 +209,7 @@ def tasil_certificate(
     continuous: bool = False,
     comparison_gain: float | None = None,
     uniform_h0: float | None = None,
+    tube: TubeBound | None = None,
 ) -> TasilCertificate:
     """Build the TaSIL certificate (docs/math/tasil.md sections 3-4; DRIP Theorem ``thm:TaSIL``
     shape).
@@ -246,6 +253,11 @@ def tasil_certificate(
         (docs/math/tasil.md section 3.8): the form ``"uniform"``, holding with probability 1. A
         sure bound needs no union bound: ``rho`` is the smaller of it and the chosen form's
         radius (when that holds), and the deterministic ``gap_bound`` takes it too.
+    tube
+        With ``comparison_gain``: the time-resolved sure bound along the expert's tube
+        (:func:`~drip_cert.bounds.tasil.tube.tube_bound`, docs/math/tasil.md section 3.10), for
+        every initial state of the support; the form ``"uniform"`` takes the smaller of it and
+        ``comparison_gain * uniform_h0`` (both hold with probability 1, the same event).
 
     Returns
     -------
@@ -304,8 +316,19 @@ def tasil_certificate(
         )
     gap_bound, route = lem.bound, "lemma"
     uni = math.inf
+    uni_how = ""
     if cg is not None and uniform_h0 is not None:
         uni = up_closed_form(cg * positive("uniform_h0", uniform_h0, allow_zero=True))
+        uni_how = (
+            f"sup||g||_2 (1 - e^(-lambda_IL T))/lambda_IL * sup_S ||pi_IL - pi*|| = {cg:.6g} * "
+            f"{uniform_h0:.6g}"
+        )
+    if cg is not None and tube is not None and tube.rho < uni:
+        uni = tube.rho
+        uni_how = (
+            f"max over t <= T of the time-resolved bound along the expert's tube "
+            f"(docs/math/tasil.md 3.10, {len(tube.H)} intervals) = {tube.rho:.6g}"
+        )
     if cg is not None:
         # every state's gap <= cg h0_i <= cg max h0 (section 3.7): valid whatever the lemma says
         gap_cmp = up_closed_form(cg * float(all0.max()))
@@ -347,8 +370,7 @@ def tasil_certificate(
                 uni,
                 True,
                 False,
-                f"every initial state of the support: gap <= sup||g||_2/lambda_IL * "
-                f"sup_S ||pi_IL - pi*|| = {cg:.6g} * {uniform_h0:.6g} (probability 1)",
+                f"every initial state of the support: gap <= {uni_how} (probability 1)",
             )
         )
     chosen = next(f for f in forms if f.name == use)
@@ -380,4 +402,5 @@ def tasil_certificate(
         gap_checks=lem.checks,
         comparison_gain=cg,
         gap_route=route,
+        tube=tube if cg is not None else None,
     )

@@ -20,6 +20,7 @@ from drip_cert.bounds.tasil._common import up_closed_form
 from drip_cert.bounds.tasil.certificate import TasilCertificate, tasil_certificate
 from drip_cert.bounds.tasil.forms import FORMS, TasilForm
 from drip_cert.bounds.tasil.trajectory import TrajectoryH, h_continuous
+from drip_cert.bounds.tasil.tube import TubeBound
 from drip_cert.learn.data import Demonstrations
 from drip_cert.learn.imitation import nominal_field
 from drip_cert.model.system import System
@@ -89,6 +90,7 @@ def tasil_section(
     method: str = "tasil-1",
     comparison_gain: Quantity | None = None,
     uniform_h0: Quantity | None = None,
+    tube: TubeBound | None = None,
 ) -> tuple[TasilCertificate, dict[str, Any], tuple[Quantity, ...]]:
     """The TaSIL certificate of ``s.learned`` (docs/math/tasil.md sections 3-4).
 
@@ -116,6 +118,9 @@ def tasil_section(
     uniform_h0
         With ``comparison_gain``: a sound bound of ``sup ||pi_IL - pi*||`` over a set proved to
         contain every expert trajectory from the support; gives the sure form ``"uniform"``.
+    tube
+        With ``comparison_gain``: the time-resolved sure bound along the expert's tube
+        (docs/math/tasil.md section 3.10); the form ``"uniform"`` takes the smaller.
 
     Returns
     -------
@@ -214,6 +219,7 @@ def tasil_section(
         continuous=True,
         comparison_gain=None if comparison_gain is None else comparison_gain.value,
         uniform_h0=None if uniform_h0 is None else uniform_h0.value,
+        tube=tube,
     )
     if comparison_gain is not None:
         provenance["comparison_gain"] = comparison_gain.to_dict()
@@ -225,6 +231,8 @@ def tasil_section(
         if uniform_h0 is not None and cert.rho_form == "uniform":
             provenance["uniform_h0"] = uniform_h0.to_dict()
             qs.append(uniform_h0)
+        if tube is not None and cert.rho_form == "uniform":
+            qs.extend(tube.inputs)
     provenance["h_how"] = how_t.value
     h_note = (
         "continuous-time sup along the expert trajectories (docs/math/tasil.md section 4)"
