@@ -228,6 +228,49 @@ def _micro(pol: MLP, n_paths: int, n_steps: int) -> None:
     }
     for name, body in parts.items():
         print(f"  micro: {name:43s} {loop(body):7.1f} ns/path-step")
+    _tanh_alternatives(min(n_paths, SUB_BATCH_PATHS), n_steps)
+
+
+TANH_FORMS: dict[str, Callable] = {
+    "XLA tanh": jnp.tanh,
+    "1 - 2/(1 + exp(2x))": lambda x: 1.0 - 2.0 / (1.0 + jnp.exp(2.0 * x)),
+    "sign(x) (1 - e)/(1 + e), e = exp(-2|x|)": lambda x: jnp.copysign(
+        (1.0 - jnp.exp(-2.0 * jnp.abs(x))) / (1.0 + jnp.exp(-2.0 * jnp.abs(x))), x
+    ),
+    "-sign(x) m/(2 + m), m = expm1(-2|x|)": lambda x: (
+        -jnp.sign(x) * jnp.expm1(-2.0 * jnp.abs(x)) / (2.0 + jnp.expm1(-2.0 * jnp.abs(x)))
+    ),
+}
+"""Ways to write ``tanh`` timed against XLA's own (issue 26): the engine keeps the fastest that
+is as accurate as the arithmetic (XLA's, in both dtypes, on this machine)."""
+
+
+def _scan_call(f: Callable, z0, half, js) -> Callable[[], Any]:
+    """A call of one jitted scan of ``z -> f(z) + half`` over ``js`` from ``z0``."""
+    run = jax.jit(lambda z: jax.lax.scan(lambda c, j: (f(c) + half, None), z, js)[0])
+    return lambda: run(z0)
+
+
+def _tanh_alternatives(batch: int, steps: int) -> None:
+    """CPU ns of :data:`TANH_PER_PATH_STEP` tanh per path-step in each of :data:`TANH_FORMS`,
+    and each form's largest relative error on [-20, 20] against numpy's float64 tanh."""
+    x = np.linspace(-20.0, 20.0, 200_001)
+    ref = np.tanh(x)
+    for dt in (np.float64, np.float32):
+        half = np.asarray(0.5, dt)
+        z0 = jnp.linspace(-3.0, 3.0, batch * TANH_PER_PATH_STEP, dtype=dt).reshape(batch, -1)
+        js = jnp.arange(steps)
+        calls = {name: _scan_call(f, z0, half, js) for name, f in TANH_FORMS.items()}
+        ns = cpu_ns_per_path_step(calls, batch * steps)
+        for name, f in TANH_FORMS.items():
+            err = np.max(
+                np.abs(np.asarray(f(jnp.asarray(x, dt)), np.float64) - ref)
+                / np.abs(ref).clip(1e-300)
+            )
+            print(
+                f"  tanh {np.dtype(dt).name}: {name:40s} {ns[name]:6.1f} CPU ns per path-step, "
+                f"max relative error {err:.2g}"
+            )
 
 
 def _float32(model, cfg: SimConfig, r64) -> None:
