@@ -56,9 +56,10 @@ _TRUE_SCENARIOS = ("learned_true", "learned_l1_true")
 _NOISY_SCENARIOS = (*_TRUE_SCENARIOS, "nominal_sde")  #: driven by the Brownian path
 
 # the step counter of L1-DRAC depends on time only: one copy for the whole batch
-# (Theta_ad is kept per path: the products Theta lam_hat and g u are then batched matrix-vector
-# products, which XLA computes path by path whatever the batch size; shared, they became one
-# (m, n) x (n, B) product whose float32 rounding depended on B through XLA's choice of kernel)
+# (Theta_ad is kept per path: Theta lam_hat is then a batched matrix-vector product, which XLA
+# computes path by path whatever the batch size; shared, it became one (m, n) x (n, B) product
+# whose float32 rounding depended on B through XLA's choice of kernel: 1 ulp, chunk-dependent.
+# It costs ~10-20 CPU ns per path-step, measured in benchmarks/mc_throughput.py's units)
 _SHARED: L1State[int | None] = L1State(x_hat=0, eta=0, lam_hat=0, theta=0, step=None)
 
 
@@ -428,7 +429,7 @@ def _advance_impl(key, carry, r0, *, model, config, records_per_call):
     l1_b = (
         jax.vmap(
             lambda st, x, fk, g_t, th: l1_step(l1p, st, x, fk, g_t, th),
-            in_axes=(_SHARED, 0, 0, 0, 0),
+            in_axes=(_SHARED, 0, 0, None, 0),
             out_axes=(0, _SHARED),
         )
         if l1p is not None
@@ -462,15 +463,8 @@ def _advance_impl(key, carry, r0, *, model, config, records_per_call):
                 x_new = x + dt * drift + noise
             else:  # learned_l1_true
                 fk = known_drift(t, x, g_t, learned_b)
-                b = x.shape[0]
                 th = model.theta_ad(t)
-                u, l1s = l1_b(
-                    l1s,
-                    x,
-                    fk,
-                    jnp.broadcast_to(g_t, (b, *g_t.shape)),
-                    jnp.broadcast_to(th, (b, *th.shape)),
-                )
+                u, l1s = l1_b(l1s, x, fk, g_t, jnp.broadcast_to(th, (x.shape[0], *th.shape)))
                 drift = fk + u @ g_t.T + lam_mu_b(t, x)
                 noise = jnp.einsum("bnd,bd->bn", diff_b(t, x), dw)
                 x_new = x + dt * drift + noise
