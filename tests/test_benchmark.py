@@ -105,7 +105,8 @@ def test_plain_scan_reference_computes_what_the_engine_computes(dtype, tol):
     assert np.max(np.abs(np.asarray(quiet(jnp.asarray(recs[0, 0]), idx)) - recs[-1, 0])) > 1e2 * tol
 
 
-def test_benchmark_runs_and_prints_its_ratio_line(capsys):
+@pytest.mark.slow  # compiles a dozen programs: ~10 s on 2 busy cores
+def test_benchmark_prints_engine_over_reference_and_the_component_bound(capsys):
     assert bench.main(["--paths", "256", "--T", "0.02", "--no-profile"]) == 0
     lines = capsys.readouterr().out.strip().splitlines()
     for dt in ("float64", "float32"):  # engine / reference and the component bound, per dtype
@@ -113,6 +114,12 @@ def test_benchmark_runs_and_prints_its_ratio_line(capsys):
         assert any(
             re.search(rf"{dt} component bound .* engine at \d+ % of it$", ln) for ln in lines
         )
+    assert any(re.search(r"float32 / float64 speed: \d+\.\d+x$", ln) for ln in lines)
+
+
+def test_benchmark_runs_and_prints_its_ratio_line(capsys):
+    assert bench.main(["--paths", "256", "--T", "0.02", "--no-profile", "--no-bound"]) == 0
+    lines = capsys.readouterr().out.strip().splitlines()
     last = lines[-1]
     m = re.fullmatch(r"engine (\S+) steps/s, numpy (\S+) steps/s, ratio (\S+)x", last)
     assert m is not None, last
