@@ -8,20 +8,31 @@ learned policy a tanh MLP 4-64-64-4, ``Lambda_mu = (0.1 + 0.05||x||) 1_4``,
 both implementations). The engine's rate excludes JIT compilation (reported separately) and
 includes its per-chunk statistics. The numpy loop steps all paths together in a Python loop.
 
-Roofline. In the same run the benchmark measures the machine's dense matrix throughput (a
-1024 x 1024 product, float64 and float32, the better of numpy's BLAS and XLA) and prints the
-engine's fraction of it for :data:`FLOPS_PER_PATH_STEP`, the dense FLOPs of one path-step (the
-policy 4-64-64-4 and ``h`` 4-32-4: ``2 * sum(fan_in * fan_out)``; elementwise work, ``tanh``,
-the noise and L1-DRAC are not counted, so the fraction is a lower bound of the useful work).
+Component bound and plain-scan reference (issue 26). In the same run, in CPU time of one
+single-threaded XLA program (``time.process_time``, median of interleaved repeats, at the
+engine's sub-batch of :data:`~drip_cert.sim.engine.SUB_BATCH_PATHS` paths), the benchmark times
 
-``--float32`` also times the engine with the policy in float32 (``policy_dtype="float32"``) and
-prints the ratio to float64 and the largest change of the gap mean; ``--dask`` times the Dask
-backend on a LocalCluster of ``default_workers()`` processes against the local backend with the
-same chunks, checks that the results are identical, and prints the per-chunk cost and the wall
+* the engine's kernel on that sub-batch (:func:`drip_cert.sim.kernel.build_chunk_fn`);
+* :func:`plain_scan_reference`, the same Euler-Maruyama + L1-DRAC step as ~40 lines of plain
+  ``jax.lax.scan`` (what a user would write; no records, codes or divergence guard), and prints
+  ``engine / reference`` (>= 1 means the engine is as fast);
+* each ingredient alone at the engine's shapes: the five dense products of the two MLPs, the
+  160 ``tanh`` per path-step, the 4 normals, and the rest of the step (the reference with the
+  MLPs and the noise removed). Their sum is the component bound of a path-step; the benchmark
+  prints it and the engine's fraction of it (bound / engine time).
+
+All of it in float64 and float32 (``SimConfig(dtype="float32")``: states, noise, L1-DRAC and
+policy). The machine is shared and noisy: CPU time, medians of interleaved repeats; the wall-time
+rates of ``simulate`` (all workers, 2 workers / 1 worker) depend on the load printed with them.
+
+``--float32`` also runs ``simulate`` in float32 end to end and with the policy alone in float32 and
+prints their rates, the ratio to float64 and the largest change of the gap means; ``--dask`` times
+the Dask backend on a LocalCluster of ``default_workers()`` processes against the local backend with
+the same chunks, checks that the results are identical, and prints the per-chunk cost and the wall
 time it implies for 10^8 and 10^9 paths on N workers.
 
 Usage: ``python benchmarks/mc_throughput.py [--quick] [--paths N] [--T T] [--dt DT] [--float32]
-[--dask] [--no-roofline]``. The last line printed is ``engine X steps/s, numpy Y steps/s, ratio
+[--dask] [--no-bound]``. The last line printed is ``engine X steps/s, numpy Y steps/s, ratio
 Zx``.
 """
 
@@ -30,9 +41,12 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import math
+import os
 import resource
 import time
 from collections.abc import Callable
+from functools import partial
+from typing import Any
 
 import numpy as np
 
@@ -42,19 +56,22 @@ from drip_cert.model.mlp import MLP, init_mlp
 from drip_cert.model.numeric import SimModel, make_model
 from drip_cert.sim.backend import Backend
 from drip_cert.sim.config import SCENARIOS, SimConfig
-from drip_cert.sim.dtype_effect import EFFECT_PATHS, policy_dtype_effect
-from drip_cert.sim.engine import default_workers, simulate
+from drip_cert.sim.dtype_effect import EFFECT_PATHS, dtype_effect
+from drip_cert.sim.engine import SUB_BATCH_PATHS, default_workers, simulate
+from drip_cert.sim.kernel import build_chunk_fn
 from drip_cert.sim.noise import normals, normals_via_jax
 
 N = 4
 
-FLOPS_PER_PATH_STEP = 2 * (4 * 64 + 64 * 64 + 64 * 4) + 2 * (4 * 32 + 32 * 4)
-"""Dense FLOPs of one path-step of the benchmark scenario: the learned policy 4-64-64-4 and
-``h`` 4-32-4 in ``f`` (9728; a multiply-add is two)."""
+BOUND_STEPS = 200
+"""Steps per timed call of the component bound and the engine/reference comparison (with
+:data:`~drip_cert.sim.engine.SUB_BATCH_PATHS` paths: ~0.1-0.3 s per call)."""
 
-ROOFLINE_SIZE = 1024
-"""Side of the square products timed for the machine's matrix throughput (large enough for
-BLAS/XLA to reach their peak, small enough to take well under a second)."""
+BOUND_REPEATS = 5
+"""Interleaved repeats of each timed call; the median is printed (the machine is shared)."""
+
+TANH_PER_PATH_STEP = 64 + 64 + 32
+"""Hidden activations of one path-step: the policy's two 64-wide layers and h's 32-wide one."""
 
 
 def build_system(
@@ -211,76 +228,232 @@ def _micro(pol: MLP, n_paths: int, n_steps: int) -> None:
     }
     for name, body in parts.items():
         print(f"  micro: {name:43s} {loop(body):7.1f} ns/path-step")
+    _tanh_alternatives(min(n_paths, SUB_BATCH_PATHS), n_steps)
 
 
-def matmul_throughput(dtype, repeats: int = 5) -> tuple[float, float]:
-    """FLOP/s of a ``ROOFLINE_SIZE`` square product: ``(numpy BLAS, XLA)``, best of
-    ``repeats``, all cores."""
-    k = ROOFLINE_SIZE
-    rng = np.random.default_rng(0)
-    a = rng.normal(size=(k, k)).astype(dtype)
-    b = rng.normal(size=(k, k)).astype(dtype)
-    flops = 2.0 * k**3
-
-    def best(f) -> float:
-        f()
-        ts = []
-        for _ in range(repeats):
-            t0 = time.perf_counter()
-            f()
-            ts.append(time.perf_counter() - t0)
-        return flops / min(ts)
-
-    ja, jb = jnp.asarray(a), jnp.asarray(b)
-    mm = jax.jit(jnp.matmul)
-    return best(lambda: a @ b), best(lambda: mm(ja, jb).block_until_ready())
+TANH_FORMS: dict[str, Callable] = {
+    "XLA tanh": jnp.tanh,
+    "1 - 2/(1 + exp(2x))": lambda x: 1.0 - 2.0 / (1.0 + jnp.exp(2.0 * x)),
+    "sign(x) (1 - e)/(1 + e), e = exp(-2|x|)": lambda x: jnp.copysign(
+        (1.0 - jnp.exp(-2.0 * jnp.abs(x))) / (1.0 + jnp.exp(-2.0 * jnp.abs(x))), x
+    ),
+    "-sign(x) m/(2 + m), m = expm1(-2|x|)": lambda x: (
+        -jnp.sign(x) * jnp.expm1(-2.0 * jnp.abs(x)) / (2.0 + jnp.expm1(-2.0 * jnp.abs(x)))
+    ),
+}
+"""Ways to write ``tanh`` timed against XLA's own (issue 26): the engine keeps the fastest that
+is as accurate as the arithmetic (XLA's, in both dtypes, on this machine)."""
 
 
-def _roofline() -> dict[str, float]:
-    """The machine's matrix throughput per dtype (the better of numpy and XLA), printed."""
+def _scan_call(f: Callable, z0, half, js) -> Callable[[], Any]:
+    """A call of one jitted scan of ``z -> f(z) + half`` over ``js`` from ``z0``."""
+    run = jax.jit(lambda z: jax.lax.scan(lambda c, j: (f(c) + half, None), z, js)[0])
+    return lambda: run(z0)
+
+
+def _tanh_alternatives(batch: int, steps: int) -> None:
+    """CPU ns of :data:`TANH_PER_PATH_STEP` tanh per path-step in each of :data:`TANH_FORMS`,
+    and each form's largest relative error on [-20, 20] against numpy's float64 tanh."""
+    x = np.linspace(-20.0, 20.0, 200_001)
+    ref = np.tanh(x)
+    for dt in (np.float64, np.float32):
+        half = np.asarray(0.5, dt)
+        z0 = jnp.linspace(-3.0, 3.0, batch * TANH_PER_PATH_STEP, dtype=dt).reshape(batch, -1)
+        js = jnp.arange(steps)
+        calls = {name: _scan_call(f, z0, half, js) for name, f in TANH_FORMS.items()}
+        ns = cpu_ns_per_path_step(calls, batch * steps)
+        for name, f in TANH_FORMS.items():
+            err = np.max(
+                np.abs(np.asarray(f(jnp.asarray(x, dt)), np.float64) - ref)
+                / np.abs(ref).clip(1e-300)
+            )
+            print(
+                f"  tanh {np.dtype(dt).name}: {name:40s} {ns[name]:6.1f} CPU ns per path-step, "
+                f"max relative error {err:.2g}"
+            )
+
+
+def _float32(model, cfg: SimConfig, r64) -> None:
+    """``simulate`` in float32 end to end and with the policy alone in float32: rates, ratios
+    to float64, and the effect on the gaps (all four scenarios, the first paths)."""
+    steps = cfg.n_paths * cfg.n_steps
+    e64 = steps / r64.run_s
+    for what, kw in (
+        ("end to end", {"dtype": "float32"}),
+        ("policy only", {"policy_dtype": "float32"}),
+    ):
+        r32 = simulate(model, dataclasses.replace(cfg, **kw), x0_sampler, progress=False)
+        e32 = steps / r32.run_s
+        print(
+            f"  simulate, float32 {what}: run {r32.run_s:.2f} s -> {e32:.3g} steps/s, "
+            f"{e32 / e64:.2f}x float64 (wall time)"
+        )
+        eff = dtype_effect(
+            model,
+            dataclasses.replace(cfg, scenarios=SCENARIOS, **kw),
+            x0_sampler,
+            n_paths=min(EFFECT_PATHS, cfg.n_paths),
+        )
+        worst = max(eff.gaps, key=lambda g: g.max_abs_mean)
+        print(
+            f"  float32 {what}, effect on {eff.n_paths} paths: gap means moved by <= "
+            f"{eff.max_abs_gap_mean:.2g} ({worst.name}: max mean {worst.max_mean_64:.4g} -> "
+            f"{worst.max_mean_32:.4g}), {eff.max_relative_to_ci:.2g}x the CI half-width; "
+            f"states by <= {eff.max_abs_state:.2g}"
+        )
+
+
+def plain_scan_reference(
+    h: MLP,
+    pol: MLP,
+    l1: L1Params,
+    n_steps: int,
+    dtype=np.float64,
+    *,
+    mlps: bool = True,
+    noise: bool = True,
+    seed: int = 0,
+) -> Callable:
+    """The benchmark's step as a plain ``lax.scan``: ``run(x0 (B, 4), idx (B,)) -> x_T``.
+
+    What a user would write for the learned + L1-DRAC true SDE of :func:`build_system`: the
+    MLPs as ``x @ W.T + b`` and ``tanh``, the L1-DRAC filter (15a)-(15c), Euler-Maruyama with
+    the engine's counter-based normals (:func:`drip_cert.sim.noise.normals`, so that it ends
+    in the engine's states); no records, status codes or divergence guard. ``mlps=False`` and
+    ``noise=False`` remove the MLPs (``h = 0``, policy ``-0.2 x``) and the normals: the "rest"
+    of the component bound.
+    """
+    f = np.dtype(dtype).type
+    hw = [(np.asarray(w, dtype), np.asarray(b, dtype)) for w, b in h.params()]
+    pw = [(np.asarray(w, dtype), np.asarray(b, dtype)) for w, b in pol.params()]
+    gT = np.asarray(0.25 * np.eye(N), dtype)  # g is symmetric
+    thT = np.asarray(np.linalg.solve(gT.T @ gT, gT.T).T, dtype)
+    k_bm = jax.random.fold_in(jax.random.PRNGKey(seed), 2)
+    dt, sq = f(l1.dt), f(math.sqrt(l1.dt))
+    gain, decay, fgain, lam_s = (
+        f(v) for v in (l1.adaptation_gain, l1.filter_decay, l1.filter_input_gain, l1.lambda_s)
+    )
+
+    def mlp(params, x):
+        for w, b in params[:-1]:
+            x = jnp.tanh(x @ w.T + b)
+        return x @ params[-1][0].T + params[-1][1]
+
+    def step(carry, j, idx):
+        x, xh, eta, lam = carry
+        if mlps:
+            fk = -0.05 * x - 0.25 * mlp(hw, x) + mlp(pw, x) @ gT
+        else:
+            fk = -0.05 * x + (-0.2 * x) @ gT
+        sample = (j > 0) & (j % l1.k == 0)
+        tilde = xh - x
+        lam = jnp.where(sample, gain * tilde, lam)
+        u = -eta
+        eta = decay * eta + fgain * (lam @ thT)
+        xh = xh + dt * (-lam_s * tilde + fk + u @ gT + lam)
+        nrm = jnp.sqrt(jnp.sum(x * x, axis=1, keepdims=True))
+        drift = fk + u @ gT + (0.1 + 0.05 * nrm)
+        sig = 0.1 + 0.05 * jnp.sqrt(nrm)
+        z = normals(k_bm, idx, j, N, dtype) if noise else jnp.full_like(x, 0.5)
+        x = x + dt * drift + sig * (sq * z)
+        return (x, xh, eta, lam), None
+
+    @jax.jit
+    def run(x0, idx):
+        x0 = x0.astype(dtype)
+        zero = jnp.zeros_like(x0)
+        body = partial(step, idx=idx)
+        return jax.lax.scan(body, (x0, x0, zero, zero), jnp.arange(n_steps, dtype=jnp.uint32))[0][0]
+
+    return run
+
+
+def cpu_ns_per_path_step(
+    calls: dict[str, Callable[[], Any]], path_steps: int, repeats: int = BOUND_REPEATS
+) -> dict[str, float]:
+    """Median CPU nanoseconds per path-step of each call, the calls interleaved (a change of the
+    machine's load hits all of them alike). Each is called once first (compilation)."""
+    for c in calls.values():
+        jax.block_until_ready(c())
+    times: dict[str, list[float]] = {k: [] for k in calls}
+    for _ in range(repeats):
+        for k, c in calls.items():
+            t0 = time.process_time()
+            jax.block_until_ready(c())
+            times[k].append((time.process_time() - t0) / path_steps * 1e9)
+    return {k: float(np.median(v)) for k, v in times.items()}
+
+
+def _ingredients(
+    h: MLP, pol: MLP, l1: L1Params, batch: int, steps: int, dtype
+) -> dict[str, Callable]:
+    """One jitted scan per ingredient of a path-step at the engine's shapes (``batch`` paths,
+    ``steps`` steps), each a closure timing one call: the five dense products, the
+    :data:`TANH_PER_PATH_STEP` tanh, the normals, and the rest of the step."""
+    key = jax.random.PRNGKey(0)
+    idx = jnp.arange(batch, dtype=jnp.uint32)
+    x0 = jax.random.uniform(key, (batch, N)).astype(dtype)
+    js = jnp.arange(steps, dtype=jnp.uint32)
+    ws = [np.asarray(w, dtype) for m in (pol, h) for w, _ in m.params()]
+    half = np.asarray(0.5, dtype)
+
+    def scan(body, init):
+        run = jax.jit(lambda c: jax.lax.scan(lambda c, j: (body(c, j), None), c, js)[0])
+        return lambda: run(init)
+
+    def products(x, j):  # 4-64-64-4 and 4-32-4 without activations (the biases fuse in)
+        p = ((x @ ws[0].T) @ ws[1].T) @ ws[2].T
+        q = (x @ ws[3].T) @ ws[4].T
+        return half * x + 1e-3 * (p + q)
+
+    def tanhs(z, j):  # the fixed point of z = tanh(z) + 1/2 keeps z normal (no denormals)
+        return jnp.tanh(z) + half
+
+    def noise(x, j):
+        return half * x + normals(key, idx, j, N, dtype)
+
+    rest = plain_scan_reference(h, pol, l1, steps, dtype, mlps=False, noise=False)
+    return {
+        "products": scan(products, x0),
+        "tanh": scan(tanhs, jnp.zeros((batch, TANH_PER_PATH_STEP), dtype)),
+        "normals": scan(noise, x0),
+        "rest": lambda: rest(x0, idx),
+    }
+
+
+def _engine_vs_bound(model, h: MLP, pol: MLP, cfg: SimConfig, steps: int) -> dict[str, float]:
+    """The engine's kernel against the plain-scan reference and the component bound, per dtype,
+    in CPU time of one single-threaded call on one sub-batch; prints them, returns the kernel's
+    CPU-ns per path-step per dtype."""
+    batch = min(SUB_BATCH_PATHS, cfg.n_paths)
+    rec = next(r for r in (100, 50, 20, 10, 5, 2, 1) if steps % r == 0)
+    kcfg = dataclasses.replace(
+        cfg, T=steps * cfg.dt, n_paths=batch, chunk_size=batch, record_every=rec
+    )
+    idx = jnp.arange(batch, dtype=jnp.uint32)
+    x0 = jax.random.uniform(jax.random.PRNGKey(1), (batch, N), minval=-1.0, maxval=1.0)
     out = {}
     for dt in ("float64", "float32"):
-        blas, xla = matmul_throughput(np.dtype(dt))
-        out[dt] = max(blas, xla)
+        kern = build_chunk_fn(model, dataclasses.replace(kcfg, dtype=dt), x0_sampler).compile(batch)
+        ref = plain_scan_reference(h, pol, cfg.l1, steps, np.dtype(dt))
+        calls = {"engine": lambda k=kern: k(idx), "reference": lambda r=ref: r(x0, idx)}
+        calls.update(_ingredients(h, pol, cfg.l1, batch, steps, np.dtype(dt)))
+        ns = cpu_ns_per_path_step(calls, batch * steps)
+        bound = ns["products"] + ns["tanh"] + ns["normals"] + ns["rest"]
+        parts = ", ".join(f"{k} {ns[k]:.0f}" for k in ("products", "tanh", "normals", "rest"))
         print(
-            f"  roofline {dt}: {ROOFLINE_SIZE}^2 product, numpy {blas / 1e9:.1f} GFLOP/s, "
-            f"XLA {xla / 1e9:.1f} GFLOP/s"
+            f"  {dt}, {batch} paths x {steps} steps, CPU ns per path-step (one core, median of "
+            f"{BOUND_REPEATS}): engine {ns['engine']:.0f}, plain-scan reference "
+            f"{ns['reference']:.0f} -> engine / reference {ns['reference'] / ns['engine']:.2f}x"
         )
+        print(
+            f"  {dt} component bound {bound:.0f} ns ({parts}) = "
+            f"{1e9 / bound:.3g} path-steps/s per core; engine at "
+            f"{100 * bound / ns['engine']:.0f} % of it"
+        )
+        out[dt] = ns["engine"]
+    print(f"  engine kernel, float32 / float64 speed: {out['float64'] / out['float32']:.2f}x")
     return out
-
-
-def _fraction(rate: float, roof: dict[str, float] | None, dt: str) -> str:
-    """``, X GFLOP/s = Y % of the dt roofline`` for ``rate`` path-steps/s (empty without)."""
-    if not roof:
-        return ""
-    gf = rate * FLOPS_PER_PATH_STEP
-    return f", {gf / 1e9:.1f} GFLOP/s = {100 * gf / roof[dt]:.0f} % of the {dt} roofline"
-
-
-def _float32(model, cfg: SimConfig, r64, roof) -> None:
-    """The engine with the policy in float32: rate, ratio to float64, the gap change."""
-    cfg32 = dataclasses.replace(cfg, policy_dtype="float32")
-    r32 = simulate(model, cfg32, x0_sampler, progress=False)
-    steps = cfg.n_paths * cfg.n_steps
-    e64, e32 = steps / r64.run_s, steps / r32.run_s
-    print(
-        f"  engine, policy in float32: run {r32.run_s:.2f} s -> {e32:.3g} steps/s, "
-        f"{e32 / e64:.2f}x float64{_fraction(e32, roof, 'float32')}"
-    )
-    # the effect on the gaps: all four scenarios, the first paths in both dtypes
-    eff = policy_dtype_effect(
-        model,
-        dataclasses.replace(cfg, scenarios=SCENARIOS),
-        x0_sampler,
-        n_paths=min(EFFECT_PATHS, cfg.n_paths),
-    )
-    worst = max(eff.gaps, key=lambda g: g.max_abs_mean)
-    print(
-        f"  float32 policy, effect on {eff.n_paths} paths: gap means moved by <= "
-        f"{eff.max_abs_gap_mean:.2g} ({worst.name}: max mean {worst.max_mean_64:.4g} -> "
-        f"{worst.max_mean_32:.4g}), {eff.max_relative_to_ci:.2g}x the CI half-width; "
-        f"states by <= {eff.max_abs_state:.2g}"
-    )
 
 
 def _dask(model, cfg: SimConfig, workers: int) -> None:
@@ -320,7 +493,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--chunk", type=int, default=None, help="engine chunk size (default: paths)")
     ap.add_argument("--all-scenarios", action="store_true", help="also time the 4-scenario pass")
     ap.add_argument("--no-profile", action="store_true")
-    ap.add_argument("--no-roofline", action="store_true", help="skip the matrix throughput")
+    ap.add_argument("--no-bound", action="store_true", help="skip the component bound")
     ap.add_argument("--float32", action="store_true", help="also time the float32 policy path")
     ap.add_argument("--dask", action="store_true", help="also time the Dask backend")
     args = ap.parse_args(argv)
@@ -345,23 +518,26 @@ def main(argv: list[str] | None = None) -> int:
     res = simulate(model, cfg, x0_sampler, progress=False)
     eng = n_paths * n_steps / res.run_s
     workers = default_workers()
-    roof = None if args.no_roofline else _roofline()
     print(
         f"  engine ({workers} workers): compile {res.compile_s:.2f} s, run {res.run_s:.2f} s "
-        f"-> {eng:.3g} steps/s{_fraction(eng, roof, 'float64')} "
-        f"({FLOPS_PER_PATH_STEP} dense FLOPs per path-step)"
+        f"-> {eng:.3g} steps/s (wall time; load average {os.getloadavg()[0]:.1f} on "
+        f"{os.cpu_count()} CPUs)"
     )
+    if not args.no_bound:
+        _engine_vs_bound(model, h, pol, cfg, min(n_steps, BOUND_STEPS))
     if args.float32:
-        _float32(model, cfg, res, roof)
+        _float32(model, cfg, res)
     if args.dask:
         _dask(model, cfg, workers)
     rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024  # Linux: KiB
     print(f"  peak resident memory after the engine: {rss:.0f} MiB (chunks of {cfg.chunk_size})")
     if not args.no_profile:
         r1 = simulate(model, cfg, x0_sampler, progress=False, workers=1)
+        r2 = simulate(model, cfg, x0_sampler, progress=False, workers=2)
         print(
-            f"  engine (1 worker, XLA's intra-op threads only): run {r1.run_s:.2f} s "
-            f"-> {n_paths * n_steps / r1.run_s:.3g} steps/s"
+            f"  engine, 1 worker: run {r1.run_s:.2f} s, 2 workers: {r2.run_s:.2f} s -> 2 workers "
+            f"/ 1 worker {r1.run_s / r2.run_s:.2f}x (wall time; load average "
+            f"{os.getloadavg()[0]:.1f})"
         )
     if args.all_scenarios:
         cfg4 = dataclasses.replace(cfg, scenarios=SCENARIOS)

@@ -23,30 +23,24 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
-from drip_cert.bounds.l1drac.toml import design_l1_report
+# Light imports only (the standard library and modules that import nothing heavy): numpy,
+# sympy, scipy, jax and matplotlib are imported inside the commands that need them, so that
+# `drip-cert --help` and a mistyped argument cost a fraction of a second (tests/test_layers.py).
 from drip_cert.diff import DEFAULT_RTOL, diff_files, diff_text
 from drip_cert.errors import AssumptionViolation, DripCertError, FingerprintError, SpecError
-from drip_cert.figures_l1 import l1_front_figure, l1_terms_figure
-from drip_cert.numerics.atomic_io import jsonable
-from drip_cert.numerics.user_files import input_file, output_dir, output_file
-from drip_cert.report import certificate_markdown, l1_design_text, train_text, validation_text
 from drip_cert.sim.backend import Backend
-from drip_cert.spec import load_spec
-from drip_cert.workflows import (
-    export_policy,
-    reproduce,
-    train_from_spec,
-    validate_recorded,
-    validate_spec,
-)
 
 
 def _print_json(obj: Any) -> None:
+    from drip_cert.numerics.atomic_io import jsonable  # numpy: off the start-up path
+
     sys.stdout.write(json.dumps(jsonable(obj), indent=2, allow_nan=False) + "\n")
 
 
 # ---------------------------------------------------------------------------- subcommands
 def cmd_check_spec(args: argparse.Namespace) -> int:
+    from drip_cert.spec import load_spec  # sympy: off the start-up path
+
     spec = load_spec(args.spec)
     s = spec.system
     if args.json:
@@ -63,9 +57,9 @@ def cmd_check_spec(args: argparse.Namespace) -> int:
 
 
 def cmd_certify(args: argparse.Namespace) -> int:
-    from drip_cert.bounds.certificate import (  # scipy.optimize: keep off the CLI start-up path
-        certify,
-    )
+    from drip_cert.bounds.certificate import certify  # scipy: off the start-up path
+    from drip_cert.report import certificate_markdown  # numpy: off the start-up path
+    from drip_cert.spec import load_spec  # sympy: off the start-up path
 
     spec = load_spec(args.spec)
     cert = certify(spec, progress=not (args.json or args.quiet))
@@ -92,6 +86,13 @@ def cmd_certify(args: argparse.Namespace) -> int:
 
 
 def cmd_design_l1(args: argparse.Namespace) -> int:
+    from drip_cert.bounds.l1drac.toml import design_l1_report  # sympy: off the start-up path
+    from drip_cert.figures_l1 import (  # numpy: off the start-up path
+        l1_front_figure,
+        l1_terms_figure,
+    )
+    from drip_cert.report import l1_design_text  # numpy: off the start-up path
+
     report = design_l1_report(args.constants, Ts=args.Ts, rho_budget=args.rho_budget)
     if args.figure:
         report["figure"] = str(l1_front_figure(report, args.figure))
@@ -106,6 +107,9 @@ def cmd_design_l1(args: argparse.Namespace) -> int:
 
 
 def cmd_train(args: argparse.Namespace) -> int:
+    from drip_cert.report import train_text  # numpy: off the start-up path
+    from drip_cert.workflows import train_from_spec  # sympy: off the start-up path
+
     summary = train_from_spec(
         args.spec,
         method=args.method,
@@ -129,6 +133,8 @@ def cmd_train(args: argparse.Namespace) -> int:
 
 
 def cmd_export_policy(args: argparse.Namespace) -> int:
+    from drip_cert.workflows import export_policy  # sympy, onnx: off the start-up path
+
     summary = export_policy(args.spec, args.out, dtype=args.dtype, block=args.block)
     if args.json:
         _print_json(summary)
@@ -143,6 +149,9 @@ def cmd_export_policy(args: argparse.Namespace) -> int:
 
 
 def cmd_validate(args: argparse.Namespace) -> int:
+    from drip_cert.report import validation_text  # numpy: off the start-up path
+    from drip_cert.workflows import validate_recorded, validate_spec  # sympy: off the start-up path
+
     if args.data is not None:
         report = validate_recorded(
             args.spec,
@@ -168,6 +177,7 @@ def cmd_validate(args: argparse.Namespace) -> int:
             progress=not args.json,
             backend=_backend(args),
             policy_dtype=args.policy_dtype,
+            dtype=args.dtype,
         )
     if args.json:
         _print_json(report.to_dict())
@@ -187,6 +197,8 @@ def cmd_diff(args: argparse.Namespace) -> int:
 
 
 def cmd_reproduce(args: argparse.Namespace) -> int:
+    from drip_cert.workflows import reproduce  # sympy: off the start-up path
+
     report = reproduce(
         args.name,
         out=args.out,
@@ -195,6 +207,7 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
         progress=not args.json,
         backend=_backend(args),
         policy_dtype=args.policy_dtype,
+        dtype=args.dtype,
     )
     if args.json:
         _print_json(report)
@@ -371,7 +384,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _add_simulation_options(q: argparse.ArgumentParser) -> None:
-    """``--backend``, ``--scheduler`` and ``--policy-dtype`` of the commands that simulate."""
+    """``--backend``, ``--scheduler``, ``--policy-dtype`` and ``--dtype`` of the commands that
+    simulate."""
     q.add_argument(
         "--backend",
         choices=["local", "dask"],
@@ -391,6 +405,14 @@ def _add_simulation_options(q: argparse.ArgumentParser) -> None:
         default="float64",
         help="arithmetic of the learned policy in the simulation (float32: faster, its effect "
         "on the gaps is measured and reported; the certificate stays float64)",
+    )
+    q.add_argument(
+        "--dtype",
+        choices=["float64", "float32"],
+        default="float64",
+        help="arithmetic of the whole simulation: states, noise, vector fields, policy and "
+        "L1-DRAC (float32: about 2x faster; its effect on the gaps is measured against float64 "
+        "and reported; the certificate stays float64)",
     )
 
 
@@ -468,6 +490,12 @@ def check_files(args: argparse.Namespace) -> None:
     SpecError
         Naming the argument's file and what to give instead (exit status 2).
     """
+    from drip_cert.numerics.user_files import (
+        input_file,
+        output_dir,
+        output_file,
+    )  # numpy: off the start-up path
+
     for dest, role, what in getattr(args, "files", ()):
         value = getattr(args, dest, None)
         if value is None:

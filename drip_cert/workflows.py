@@ -110,6 +110,7 @@ def run_pipeline(
     progress: bool = False,
     backend: Any = None,
     policy_dtype: str = "float64",
+    dtype: str = "float64",
 ) -> PipelineResult:
     """Train -> certify -> simulate -> validate, with one seed and one set of demonstrations.
 
@@ -141,9 +142,10 @@ def run_pipeline(
         Overrides of ``[simulation]`` settings for this run (e.g. ``dt``, ``Ts``).
     progress
         Stages, training steps and simulation progress on stderr.
-    backend, policy_dtype
-        Where the Monte Carlo runs (:class:`~drip_cert.sim.backend.Backend`; no number changes)
-        and the opt-in float32 policy path; passed to :func:`~drip_cert.validate.validate`.
+    backend, policy_dtype, dtype
+        Where the Monte Carlo runs (:class:`~drip_cert.sim.backend.Backend`; no number changes),
+        the opt-in float32 policy path and the opt-in float32 simulation (end to end); passed to
+        :func:`~drip_cert.validate.validate`.
     """
     from drip_cert.learn.imitation import (  # jax: keep off the CLI start-up path
         demonstration_set,
@@ -220,6 +222,7 @@ def run_pipeline(
                     progress=progress,
                     backend=backend,
                     policy_dtype=policy_dtype,
+                    dtype=dtype,
                 )
             )
             timings[f"validate_{n}_s"] = time.perf_counter() - t0
@@ -526,6 +529,7 @@ def validate_spec(
     progress: bool = False,
     backend: Any = None,
     policy_dtype: str = "float64",
+    dtype: str = "float64",
 ) -> ValidationReport:
     """``drip-cert validate``: certify the spec's system and validate it by simulation.
 
@@ -533,7 +537,7 @@ def validate_spec(
     demonstrations then feed the certificate). ``trajectories`` is the number of simulated
     paths; ``out`` receives ``validation.json``, ``validation.md`` and ``validation.png``
     (:func:`~drip_cert.report.write_validation_outputs`) and the simulation (atomically).
-    ``backend`` and ``policy_dtype``: see :func:`run_pipeline`.
+    ``backend``, ``policy_dtype`` and ``dtype``: see :func:`run_pipeline`.
     """
     if out is not None:
         output_dir(out)
@@ -549,6 +553,7 @@ def validate_spec(
         progress=progress,
         backend=backend,
         policy_dtype=policy_dtype,
+        dtype=dtype,
     )
     rep = run.validations[0].with_notes_before(run.notes)
     if out is not None:
@@ -641,9 +646,10 @@ def reproduce(
     progress: bool = True,
     backend: Any = None,
     policy_dtype: str = "float64",
+    dtype: str = "float64",
 ) -> dict[str, Any]:
     """``drip-cert reproduce paper-4d``; see the module docstring (``backend``,
-    ``policy_dtype``: see :func:`run_pipeline`)."""
+    ``policy_dtype``, ``dtype``: see :func:`run_pipeline`)."""
     t_start = time.perf_counter()
     out = output_dir(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -662,6 +668,7 @@ def reproduce(
         progress=progress,
         backend=backend,
         policy_dtype=policy_dtype,
+        dtype=dtype,
     )
     cert = run.certificate
     assert cert is not None  # certify=True

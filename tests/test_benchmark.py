@@ -5,6 +5,7 @@ from __future__ import annotations
 import re
 
 import numpy as np
+import pytest
 
 from drip_cert._jax import jax, jnp
 from drip_cert.control.l1drac import L1Params
@@ -65,9 +66,61 @@ def test_numpy_baseline_computes_what_the_engine_computes():
     assert np.max(np.abs(x_other - x_eng)) > 1e3 * SAME_PATH_TOL
 
 
-def test_benchmark_runs_and_prints_its_ratio_line(capsys):
+# the same operations in float32 (unit roundoff 6e-8) over 1000 steps of an O(1) contracting
+# state, with the float32 normals: observed 1.0e-6 against the engine's float32 kernel
+SAME_PATH_TOL_F32 = 1e-4
+
+
+@pytest.mark.parametrize(
+    ("dtype", "tol"), [("float64", SAME_PATH_TOL), ("float32", SAME_PATH_TOL_F32)]
+)
+def test_plain_scan_reference_computes_what_the_engine_computes(dtype, tol):
+    """The engine / reference ratio compares equal work: from the engine's initial states, the
+    reference ends in the engine's states (float64 and float32 end to end)."""
+    paths, n_steps, dt = 64, 1000, 1e-3
+    model, h, pol = bench.build_system(0)
+    l1 = L1Params(omega=50.0, lambda_s=10.0, Ts=10 * dt, dt=dt)
+    cfg = SimConfig(
+        T=n_steps * dt,
+        dt=dt,
+        n_paths=paths,
+        seed=3,
+        chunk_size=paths,
+        scenarios=("learned_l1_true",),
+        l1=l1,
+        record_every=n_steps,
+        n_sample_paths=0,
+        dtype=dtype,
+    )
+    idx = jnp.arange(paths, dtype=jnp.uint32)
+    recs, codes = build_chunk_fn(model, cfg, bench.x0_sampler)(idx)
+    assert not np.any(np.asarray(codes))
+    recs = np.asarray(recs)
+    assert recs.dtype == np.dtype(dtype)
+    ref = bench.plain_scan_reference(h, pol, l1, n_steps, np.dtype(dtype), seed=3)
+    x_ref = np.asarray(ref(jnp.asarray(recs[0, 0]), idx))
+    assert np.max(np.abs(x_ref - recs[-1, 0])) < tol
+    # and it can fail: the reference without its noise ends elsewhere
+    quiet = bench.plain_scan_reference(h, pol, l1, n_steps, np.dtype(dtype), noise=False, seed=3)
+    assert np.max(np.abs(np.asarray(quiet(jnp.asarray(recs[0, 0]), idx)) - recs[-1, 0])) > 1e2 * tol
+
+
+@pytest.mark.slow  # compiles a dozen programs: ~10 s on 2 busy cores
+def test_benchmark_prints_engine_over_reference_and_the_component_bound(capsys):
     assert bench.main(["--paths", "256", "--T", "0.02", "--no-profile"]) == 0
-    last = capsys.readouterr().out.strip().splitlines()[-1]
+    lines = capsys.readouterr().out.strip().splitlines()
+    for dt in ("float64", "float32"):  # engine / reference and the component bound, per dtype
+        assert any(re.search(rf"{dt}, .* engine / reference \d+\.\d+x$", ln) for ln in lines)
+        assert any(
+            re.search(rf"{dt} component bound .* engine at \d+ % of it$", ln) for ln in lines
+        )
+    assert any(re.search(r"float32 / float64 speed: \d+\.\d+x$", ln) for ln in lines)
+
+
+def test_benchmark_runs_and_prints_its_ratio_line(capsys):
+    assert bench.main(["--paths", "256", "--T", "0.02", "--no-profile", "--no-bound"]) == 0
+    lines = capsys.readouterr().out.strip().splitlines()
+    last = lines[-1]
     m = re.fullmatch(r"engine (\S+) steps/s, numpy (\S+) steps/s, ratio (\S+)x", last)
     assert m is not None, last
     eng, npy, ratio = (float(v) for v in m.groups())

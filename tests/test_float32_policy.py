@@ -12,8 +12,10 @@ from drip_cert._jax import jax, jnp
 from drip_cert.errors import SpecError
 from drip_cert.model.mlp import init_mlp
 from drip_cert.sim.config import SimConfig
-from drip_cert.sim.dtype_effect import DtypeEffect, policy_dtype_effect
+from drip_cert.sim.dtype_effect import DtypeEffect, dtype_effect, policy_dtype_effect
 from drip_cert.sim.engine import simulate
+from drip_cert.sim.kernel import build_chunk_fn
+from drip_cert.sim.noise import normals
 from drip_cert.sim.precision import lower_precision
 from drip_cert.sim.resume import settings_hash
 from tests.test_engine import _CFG, _arrays, _mlp_model, _x0, _x0_bar
@@ -134,3 +136,99 @@ def test_policy_dtype_effect_reports_the_shift_against_the_mc_error(model):
     assert d["n_paths"] == 200 and len(d["gaps"]) == len(eff.gaps)
     with pytest.raises(SpecError, match="n_paths"):
         policy_dtype_effect(model, cfg, _x0, _x0_bar, n_paths=0)
+
+
+# ---------------------------------------------------------------------------- float32 end to end
+F32_END_ABS = 1e-4
+"""|x32 - x64| of simulated O(1) states after 100 steps with everything in float32: each step
+rounds the state, the fields, the policy and the normals at ~6e-8 relative; grown over 100 steps
+by the closed loop, observed 4.2e-7. 1e-4 still fails on a wrong computation (another noise
+stream or weight moves the states by ~1e-2)."""
+
+
+def test_float32_end_to_end_is_float32_and_moves_paths_by_rounding_only(model):
+    """Same seed, same paths: every scenario (the expert's too) moves by float32 rounding only,
+    and the kernel's records are float32."""
+    r64 = simulate(model, _CFG, _x0, _x0_bar, progress=False)
+    cfg32 = dataclasses.replace(_CFG, dtype="float32")
+    r32 = simulate(model, cfg32, _x0, _x0_bar, progress=False)
+    d = np.abs(r32.sample_paths - r64.sample_paths)
+    i_exp = _CFG.scenarios.index("expert_nominal")
+    assert 0 < np.max(d[i_exp]) and 0 < np.max(d) <= F32_END_ABS
+    idx = jnp.arange(4, dtype=jnp.uint32)
+    recs, _ = build_chunk_fn(model, cfg32, _x0, _x0_bar)(idx)
+    assert recs.dtype == jnp.float32
+
+
+def test_float32_end_to_end_keeps_chunk_and_worker_invariance(model):
+    cfg = dataclasses.replace(_CFG, dtype="float32")
+    base = simulate(model, cfg, _x0, _x0_bar, progress=False)
+    for cs, workers in ((7, 1), (45, 2)):
+        res = simulate(
+            model,
+            dataclasses.replace(cfg, chunk_size=cs),
+            _x0,
+            _x0_bar,
+            progress=False,
+            workers=workers,
+        )
+        _assert_bitwise(base, res)
+
+
+def test_dtype_setting_hash_and_effect(model):
+    with pytest.raises(SpecError, match="dtype"):
+        dataclasses.replace(_CFG, dtype="float16")
+    assert "dtype" not in _CFG.to_dict()  # float64 runs keep their resume hash
+    cfg32 = dataclasses.replace(_CFG, dtype="float32")
+    assert settings_hash(model, _CFG, _x0, _x0_bar) != settings_hash(model, cfg32, _x0, _x0_bar)
+    cfg = SimConfig(
+        T=0.2, dt=0.002, n_paths=300, seed=4, l1=_CFG.l1, record_every=10, chunk_size=128
+    )
+    eff = dtype_effect(model, dataclasses.replace(cfg, dtype="float32"), _x0, _x0_bar, n_paths=200)
+    assert eff.end_to_end and eff.to_dict()["float32"] == "end_to_end"
+    assert 0 < eff.max_abs_gap_mean <= F32_END_ABS
+    assert "end to end" in eff.note()
+    with pytest.raises(SpecError, match="float32"):
+        dtype_effect(model, cfg, _x0, _x0_bar)  # nothing in float32: nothing to measure
+
+
+def test_float32_normals_are_the_same_increments_rounded():
+    """The float32 noise hashes the same counters: each normal is within float32 resolution of
+    the float64 one (bulk |z| < 3: F32_Z_BULK_ABS), and no normal is infinite."""
+    key = jax.random.fold_in(jax.random.PRNGKey(5), 2)
+    idx = jnp.arange(4096, dtype=jnp.uint32)
+    z64 = np.asarray(normals(key, idx, jnp.uint32(7), 4))
+    z32 = np.asarray(normals(key, idx, jnp.uint32(7), 4, jnp.float32))
+    assert z32.dtype == np.float32 and np.all(np.isfinite(z32))
+    bulk = np.abs(z64) < 3.0
+    assert np.max(np.abs(z32[bulk] - z64[bulk])) < F32_Z_BULK_ABS
+    assert np.max(np.abs(z32)) < 5.4
+
+
+F32_Z_BULK_ABS = 2e-5
+"""float32 normals against float64 for |z| < 3: the float32 u is the midpoint of the 2^-22-wide
+bin the float64 u lies in, so |du| <= 2^-23 = 1.2e-7, and dz/du = sqrt(pi/2) e^{z^2/2} <= 113 at
+|z| = 3: |dz| <= 1.35e-5, plus a few float32 ulps of erfinv (~1e-6); observed 1.43e-5."""
+
+
+def test_cli_dtype_reaches_the_simulation(monkeypatch, tmp_path):
+    import drip_cert.workflows as workflows
+    from drip_cert.cli import main
+    from tests.helpers import EXAMPLES
+
+    seen = {}
+
+    class _Report:
+        status = "holds"
+
+        def to_dict(self):
+            return {}
+
+    def fake(*_, **kw):
+        seen.update(kw)
+        return _Report()
+
+    monkeypatch.setattr(workflows, "validate_spec", fake)
+    spec = EXAMPLES / "regression_ci" / "plant.toml"
+    main(["validate", str(spec), "--dtype", "float32", "--json"])
+    assert seen["dtype"] == "float32" and seen["policy_dtype"] == "float64"

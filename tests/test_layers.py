@@ -248,11 +248,16 @@ def test_the_checker_fails_on_an_upward_import_a_sideways_import_and_a_cycle():
 # ---------------------------------------------------------------------------- local imports
 #: Third-party packages slow enough to import that a function-local import may keep them off an
 #: import path (the design allows one "only to keep jax off the CLI's start-up path"; the others
-#: are as slow: seconds each adds to ``import drip_cert.cli``, which already loads numpy, sympy
-#: and flint, were jax 0.3, optax 0.4, cvxpy 1.0, ot 0.9, matplotlib.pyplot 0.3, scipy.optimize
-#: 0.2, scipy.stats 0.5; clarabel is cvxpy's solver). numpy, sympy, scipy.special (0.1 s) and
-#: every drip_cert module are not on this list: import them at the top of the module.
+#: are as slow: seconds each adds to ``import drip_cert.cli`` were jax 0.3, optax 0.4, cvxpy 1.0,
+#: ot 0.9, matplotlib.pyplot 0.3, scipy.optimize 0.2, scipy.stats 0.5; clarabel is cvxpy's
+#: solver; numpy 0.1, sympy 0.3, scipy.special 0.2 and flint together made `drip-cert --help`
+#: cost 0.6 CPU-s, so the CLI imports them only in the commands that need them). Every drip_cert
+#: module is not on this list: import it at the top of the module unless it brings one of these.
 HEAVY: tuple[str, ...] = (
+    "numpy",
+    "sympy",
+    "scipy",
+    "flint",
     "jax",
     "jaxlib",
     "optax",
@@ -385,7 +390,8 @@ def test_every_function_local_import_keeps_a_heavy_package_off_an_import_path():
 @pytest.mark.parametrize(
     "source, problem",
     [
-        ("def f():\n    import numpy as np\n", "move it to the top"),
+        ("def f():\n    import numpy as np\n", "justify it"),
+        ("import numpy as np\n\n\ndef f():\n    import numpy.linalg  # numpy: again\n", "move it"),
         (
             "def f():\n    import math  # jax: keep off the CLI start-up path\n",
             "move it to the top",
@@ -442,3 +448,33 @@ def test_the_cli_starts_without_jax_or_any_heavy_package():
     )
     assert out.returncode == 0, out.stderr
     assert out.stdout.strip() == "", f"imported by `import drip_cert.cli`: {out.stdout}"
+
+
+HELP_CPU_S = 0.2
+"""Most CPU seconds `drip-cert --help` may take (user + system of the child; issue 26: it took
+0.6-0.9 s while the CLI imported sympy, numpy and scipy at module level; ~0.05 s without)."""
+
+
+def test_drip_cert_help_imports_no_heavy_package_and_is_fast():
+    """`drip-cert --help` runs the parser only: none of :data:`HEAVY` (numpy and sympy included)
+    is imported, and the child process costs at most :data:`HELP_CPU_S` CPU seconds."""
+    import resource
+
+    code = (
+        "import sys\n"
+        "from drip_cert.cli import main\n"
+        "sys.argv = ['drip-cert', '--help']\n"
+        "try:\n    main()\nexcept SystemExit:\n    pass\n"
+        f"print('MODULES', ','.join(h for h in {HEAVY!r} if h in sys.modules), file=sys.stderr)"
+    )
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    out = subprocess.run(
+        [sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, check=False
+    )
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    assert out.returncode == 0, out.stderr
+    assert "usage: drip-cert" in out.stdout
+    line = [ln for ln in out.stderr.splitlines() if ln.startswith("MODULES")]
+    assert line == ["MODULES "], f"imported by `drip-cert --help`: {out.stderr}"
+    cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+    assert cpu <= HELP_CPU_S, f"`drip-cert --help` took {cpu:.2f} CPU-s"

@@ -69,7 +69,7 @@ def new_state(model: SimModel, cfg: SimConfig) -> RunState:
 
 def absorb(state: RunState, cfg: SimConfig, idx: np.ndarray, recs, codes) -> RunState:
     """Add one chunk's recorded states and codes to the run state (pure)."""
-    recs = np.asarray(recs)
+    recs = np.asarray(recs, dtype=np.float64)  # float32 runs: the statistics stay float64
     codes = np.asarray(codes)
     real = idx < cfg.n_paths
     ok = (codes == STATUS_OK) & real[None, :]

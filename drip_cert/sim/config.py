@@ -19,6 +19,7 @@ from drip_cert.errors import SpecError
 __all__ = [
     "DEFAULT_SCENARIOS",
     "GAPS",
+    "DTYPES",
     "POLICY_DTYPES",
     "SCENARIOS",
     "STATUS_CAP",
@@ -62,6 +63,9 @@ GAPS = (
 
 POLICY_DTYPES = ("float64", "float32")
 """Dtypes the learned policy can be evaluated in (:attr:`SimConfig.policy_dtype`)."""
+
+DTYPES = ("float64", "float32")
+"""Dtypes of a whole simulation (:attr:`SimConfig.dtype`)."""
 
 _STEP_RTOL = 1e-9
 """Relative tolerance on T/dt being an integer (float inputs like T=5, dt=1e-3 are a few ulps
@@ -108,6 +112,13 @@ class SimConfig:
         are then of ``||M (a - b)||`` instead of ``||a - b||`` (a system simulated in
         ``z = Theta x`` with ``M = Theta^{-1}`` gives the gaps in the user's ``x``); recorded
         trajectories and W2 clouds stay in the simulated coordinates.
+    policy_dtype
+        ``"float32"``: the learned policy alone in float32 (:mod:`drip_cert.sim.precision`).
+    dtype
+        ``"float32"``: the whole simulation in float32 (states, noise, every vector field, the
+        policy and L1-DRAC; :mod:`drip_cert.sim.kernel`); the statistics are accumulated in
+        float64 either way. Opt-in; its effect on the gaps is measured against float64
+        (:mod:`drip_cert.sim.dtype_effect`).
     """
 
     T: float
@@ -127,12 +138,17 @@ class SimConfig:
     divergence_cap: float = 1e6
     gap_readout: tuple[tuple[float, ...], ...] | None = None
     policy_dtype: str = "float64"
+    dtype: str = "float64"
 
     def __post_init__(self) -> None:
         if self.policy_dtype not in POLICY_DTYPES:
             raise SpecError(
                 f"policy_dtype must be one of {POLICY_DTYPES}, got {self.policy_dtype!r}",
                 field="SimConfig.policy_dtype",
+            )
+        if self.dtype not in DTYPES:
+            raise SpecError(
+                f"dtype must be one of {DTYPES}, got {self.dtype!r}", field="SimConfig.dtype"
             )
         if self.gap_readout is not None:
             M = np.array(self.gap_readout, dtype=np.float64)
@@ -269,4 +285,6 @@ class SimConfig:
             out["gap_readout"] = [list(r) for r in self.gap_readout]
         if self.policy_dtype == "float64":
             del out["policy_dtype"]  # the resume hash of float64 runs is unchanged
+        if self.dtype == "float64":
+            del out["dtype"]
         return out

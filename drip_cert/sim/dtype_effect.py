@@ -1,11 +1,12 @@
-"""The measured effect of the float32 policy path on a run's gap statistics.
+"""The measured effect of the float32 paths (the policy alone, or end to end) on a run's gaps.
 
-:func:`policy_dtype_effect` simulates the first paths of a run twice, with the learned policy in
-float64 and in float32 (:mod:`drip_cert.sim.precision`). The engine's noise and initial states
+:func:`dtype_effect` simulates the first paths of a run twice, as asked (the learned policy in
+float32, :mod:`drip_cert.sim.precision`, or everything in float32, ``SimConfig.dtype``) and all in
+float64; :func:`policy_dtype_effect` is its policy-only case. The engine's noise and initial states
 depend only on the seed and a path's global index, so both runs see the same paths and the
-differences are the policy's float32 rounding alone. The result, a :class:`DtypeEffect`, is
-reported next to a float32 run (``drip-cert validate --policy-dtype float32``) so that a user can
-decide whether the speed is worth it; the certificate itself is always float64.
+differences are the float32 rounding alone. The result, a :class:`DtypeEffect`, is reported next to
+a float32 run (``drip-cert validate --dtype float32`` or ``--policy-dtype float32``) so that a user
+can decide whether the speed is worth it; the certificate itself is always float64.
 """
 
 from __future__ import annotations
@@ -18,10 +19,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from drip_cert.errors import SpecError
-from drip_cert.sim.config import POLICY_DTYPES
 from drip_cert.sim.engine import simulate
 
-__all__ = ["EFFECT_PATHS", "DtypeEffect", "GapShift", "policy_dtype_effect"]
+__all__ = ["EFFECT_PATHS", "DtypeEffect", "GapShift", "dtype_effect", "policy_dtype_effect"]
 
 EFFECT_PATHS = 1000
 """Default number of paths (the first ones of the run) on which the float32 effect is measured:
@@ -86,6 +86,8 @@ class DtypeEffect:
     n_paths: int
     gaps: tuple[GapShift, ...]
     max_abs_state: float
+    end_to_end: bool = False
+    """``True``: the whole simulation in float32 (``SimConfig.dtype``); ``False``: the policy."""
 
     @property
     def max_abs_gap_mean(self) -> float:
@@ -104,8 +106,14 @@ class DtypeEffect:
         rel = self.max_relative_to_ci
         worst = max(self.gaps, key=lambda g: g.max_abs_mean, default=None)
         where = f" ({worst.name})" if worst is not None else ""
+        what = (
+            "simulated in float32 end to end (state, noise, vector fields, policy and L1-DRAC; "
+            "statistics in float64)"
+            if self.end_to_end
+            else "policy evaluated in float32 (state, noise and L1-DRAC in float64)"
+        )
         return (
-            f"policy evaluated in float32 (state, noise and L1-DRAC in float64): on the first "
+            f"{what}: on the first "
             f"{self.n_paths} paths, simulated again in float64, the mean gaps moved by at most "
             f"{self.max_abs_gap_mean:.3g}{where}, {rel:.3g} times the Monte-Carlo CI half-width "
             f"of the checked maximum, and the sample trajectories by at most "
@@ -116,6 +124,7 @@ class DtypeEffect:
         """JSON-ready dictionary."""
         return {
             "n_paths": self.n_paths,
+            "float32": "end_to_end" if self.end_to_end else "policy",
             "max_abs_gap_mean": self.max_abs_gap_mean,
             "max_relative_to_ci": _finite(self.max_relative_to_ci),
             "max_abs_state": self.max_abs_state,
@@ -137,15 +146,32 @@ def policy_dtype_effect(
     n_paths: int = EFFECT_PATHS,
     backend=None,
 ) -> DtypeEffect:
-    """Simulate the first ``n_paths`` paths of ``config`` with the policy in float64 and float32.
+    """:func:`dtype_effect` of the policy alone in float32 (``config.policy_dtype`` and
+    ``config.dtype`` are ignored)."""
+    cfg = dataclasses.replace(config, policy_dtype="float32", dtype="float64")
+    return dtype_effect(model, cfg, x0_sampler, x0_bar_sampler, n_paths=n_paths, backend=backend)
+
+
+def dtype_effect(
+    model,
+    config,
+    x0_sampler: Callable,
+    x0_bar_sampler: Callable | None = None,
+    *,
+    n_paths: int = EFFECT_PATHS,
+    backend=None,
+) -> DtypeEffect:
+    """Simulate the first ``n_paths`` paths of ``config`` as it is and all in float64.
 
     The engine's noise and initial states depend only on the seed and a path's global index, so
-    both runs see the same paths: the differences are the float32 rounding of the policy alone.
+    both runs see the same paths: the differences are the float32 rounding alone (of the policy
+    with ``config.policy_dtype="float32"``, of everything with ``config.dtype="float32"``, whose
+    normals are the float32 roundings of the same Brownian increments).
 
     Parameters
     ----------
     model, config, x0_sampler, x0_bar_sampler
-        As for :func:`~drip_cert.sim.engine.simulate` (``config.policy_dtype`` is ignored).
+        As for :func:`~drip_cert.sim.engine.simulate`; ``config`` must ask for float32.
     n_paths
         Paths compared (at most ``config.n_paths``).
     backend
@@ -157,6 +183,11 @@ def policy_dtype_effect(
     """
     if isinstance(n_paths, bool) or int(n_paths) < 1:
         raise SpecError(f"n_paths must be >= 1, got {n_paths!r}", field="n_paths")
+    if config.dtype == "float64" and config.policy_dtype == "float64":
+        raise SpecError(
+            "the config asks for no float32 arithmetic: set dtype or policy_dtype to 'float32'",
+            field="SimConfig.dtype",
+        )
     k = min(int(n_paths), config.n_paths)
     base = dataclasses.replace(
         config,
@@ -165,18 +196,10 @@ def policy_dtype_effect(
         n_sample_paths=min(max(config.n_sample_paths, 8), k),
         w2_times=(),
     )
-    runs = {
-        dt: simulate(
-            model,
-            dataclasses.replace(base, policy_dtype=dt),
-            x0_sampler,
-            x0_bar_sampler,
-            progress=False,
-            backend=backend,
-        )
-        for dt in POLICY_DTYPES
-    }
-    r64, r32 = runs["float64"], runs["float32"]
+    r64, r32 = (
+        simulate(model, c, x0_sampler, x0_bar_sampler, progress=False, backend=backend)
+        for c in (dataclasses.replace(base, policy_dtype="float64", dtype="float64"), base)
+    )
     shifts = []
     for g64, g32 in zip(r64.gaps, r32.gaps):
         same = g32.path_max.shape == g64.path_max.shape  # differs only if divergence differs
@@ -198,4 +221,5 @@ def policy_dtype_effect(
         n_paths=k,
         gaps=tuple(shifts),
         max_abs_state=float(np.nanmax(np.abs(r32.sample_paths - r64.sample_paths))),
+        end_to_end=config.dtype != "float64",
     )

@@ -49,9 +49,12 @@ Backends. ``backend=Backend("dask", scheduler)`` computes the chunks as tasks on
 only its chunks); the chunks are absorbed here in the same order, so the statistics and the
 resume files are the local backend's, bit for bit.
 
-Float32 policy. ``SimConfig(policy_dtype="float32")`` evaluates the learned policy in float32
-(:mod:`drip_cert.sim.precision`), everything else in float64; opt-in, and its effect on the gaps
-is measured by :func:`drip_cert.sim.dtype_effect.policy_dtype_effect`.
+Float32. ``SimConfig(policy_dtype="float32")`` evaluates the learned policy in float32
+(:mod:`drip_cert.sim.precision`), everything else in float64; ``SimConfig(dtype="float32")``
+runs the whole simulation in float32 (states, noise, vector fields, policy, L1-DRAC; about 2x
+the float64 rate, ``benchmarks/mc_throughput.py``). Both are opt-in and bit-for-bit independent
+of chunking and workers too, and their effect on the gaps is measured against float64 by
+:func:`drip_cert.sim.dtype_effect.dtype_effect`.
 
 Progress. The bar counts path-steps. The kernel runs a batch in calls of a few recorded times each
 (:mod:`drip_cert.sim.kernel`), and the bar advances after each call, so a run of one chunk moves
@@ -83,7 +86,15 @@ from drip_cert.sim.kernel import build_chunk_fn
 from drip_cert.sim.result import SimResult, build_result
 from drip_cert.sim.resume import open_run, save_state, settings_hash
 
-__all__ = ["default_workers", "simulate"]
+__all__ = ["SUB_BATCH_PATHS", "default_workers", "simulate"]
+
+SUB_BATCH_PATHS = 2048
+"""Most paths of one compiled call. A chunk is simulated in sub-batches of at most this many
+paths, so that a call's hidden activations (a (B, 64) float64 layer is 1 MiB at B = 2048) stay in
+a core's L2 cache: on the benchmark system (2 MiB L2 per core) the CPU time per path-step was the
+same within the noise from 2048 to 8192 paths and 1.4x higher at 32768 (``benchmarks/
+mc_throughput.py``). Sub-batching changes no number: the noise of a path is a function of its
+global index."""
 
 _MAX_CHUNK_BYTES = 1 << 30
 """Largest recorded-state block one chunk may return (1 GiB): beyond it the run would swap on
@@ -125,11 +136,12 @@ def simulate(
         incomplete unless all chunks are done).
     workers
         Compiled calls run at once from a thread pool (``None``: the usable CPU cores on the CPU
-        backend, 1 on an accelerator). One call keeps two cores only partly busy; concurrent
-        calls fill them (``benchmarks/mc_throughput.py``: 3.6e6 path-steps/s with 1 worker,
-        4.4e6 with 2, on the 4-D paper system). Fewer chunks than workers are split into equal
-        sub-batches. Results do not depend on ``workers``, bit for bit: the noise of
-        a path is a function of its global index, and chunks are absorbed in order.
+        backend, 1 on an accelerator). Each call is one single-threaded XLA program
+        (:mod:`drip_cert._jax`), so that the workers fill the cores side by side. A chunk is
+        simulated in sub-batches of at most :data:`SUB_BATCH_PATHS` paths (cache), and fewer
+        chunks than workers are split into equal sub-batches. Results do not depend on
+        ``workers``, bit for bit: the noise of a path is a function of its global index, and
+        chunks are absorbed in order.
     backend
         :class:`~drip_cert.sim.backend.Backend`: ``None`` or ``Backend()`` runs here;
         ``Backend("dask", scheduler)`` runs one task per chunk on a Dask cluster
@@ -195,7 +207,9 @@ def simulate(
             raise SpecError(f"workers must be >= 1, got {workers!r}", field="workers")
         # memory: at most _MAX_CHUNK_BYTES of records in flight
         n_workers = max(1, min(n_workers, _MAX_CHUNK_BYTES // max(rec_bytes, 1)))
+        # sub-batches: enough to keep every worker busy, and small enough for the cache
         parts = max(1, min(n_workers // len(todo), cfg.chunk_size))
+        parts = max(parts, -(-cfg.chunk_size // SUB_BATCH_PATHS))
         sub = -(-cfg.chunk_size // parts)  # paths per call; the last part is padded
         t0 = time.perf_counter()
         kernel = build_chunk_fn(model, cfg, x0_sampler, x0_bar_sampler).compile(sub)

@@ -1,13 +1,22 @@
 """The jitted kernel: one batch of paths of every scenario, a block of recorded times per call.
 
 Discretisation: Euler-Maruyama with step ``dt`` for the SDEs and explicit Euler with the SAME
-``dt`` for the nominal ODEs (:mod:`drip_cert.sim.engine` explains why). Time-major: one
-``lax.scan`` over the ``record_every`` steps between two recorded times with the whole batch in
-the carry, nested in a scan over ``records_per_call`` recorded times. A batch is simulated by one
+``dt`` for the nominal ODEs (:mod:`drip_cert.sim.engine` explains why). Time-major: one flat
+``lax.scan`` over the ``records_per_call * record_every`` steps of a call with the whole batch
+in the carry, and the recorded states written into a buffer carried along (slot
+``(j - j0) // record_every`` after step ``j``; the last write into a slot is the state at its
+recorded time). A nested scan over the recorded times cost up to 73 ns per path-step of ~257
+(issue 26). The model's weights are compile-time constants of the program (closed over at
+trace time). A batch is simulated by one
 call of :meth:`CompiledChunk.start` (initial states, codes and L1-DRAC states) and
 ``n_calls`` calls of :meth:`CompiledChunk.advance`, each returning its block of recorded states;
 between two calls the host may report progress. The carry stays on the device, and every call
 runs the same step on the same numbers, so the split into calls changes no bit.
+
+Arithmetic: float64, or float32 end to end with ``SimConfig(dtype="float32")``: every model
+function re-evaluated in float32 (:func:`drip_cert.sim.precision.in_dtype`), float32 normals
+from the same counters, float32 states and L1-DRAC; the records are float32 and the host
+accumulates them in float64.
 
 Randomness: path ``i`` draws its initial states from ``fold_in(k_x0, i)`` (and
 ``fold_in(k_x0bar, i)``) and its Brownian increments from the counter-based
@@ -32,7 +41,7 @@ from drip_cert.errors import SpecError
 from drip_cert.model.numeric import SimModel
 from drip_cert.sim.config import STATUS_CAP, STATUS_NONFINITE, STATUS_OK, SimConfig
 from drip_cert.sim.noise import normals
-from drip_cert.sim.precision import lower_precision
+from drip_cert.sim.precision import in_dtype, lower_precision
 
 __all__ = ["ChunkKernel", "CompiledChunk", "ExportedChunk", "build_chunk_fn"]
 
@@ -46,8 +55,12 @@ progress many times."""
 _TRUE_SCENARIOS = ("learned_true", "learned_l1_true")
 _NOISY_SCENARIOS = (*_TRUE_SCENARIOS, "nominal_sde")  #: driven by the Brownian path
 
-# Theta_ad and the step counter of L1-DRAC depend on time only: one copy for the whole batch
-_SHARED: L1State[int | None] = L1State(x_hat=0, eta=0, lam_hat=0, theta=None, step=None)
+# the step counter of L1-DRAC depends on time only: one copy for the whole batch
+# (Theta_ad is kept per path: Theta lam_hat is then a batched matrix-vector product, which XLA
+# computes path by path whatever the batch size; shared, it became one (m, n) x (n, B) product
+# whose float32 rounding depended on B through XLA's choice of kernel: 1 ulp, chunk-dependent.
+# It costs ~10-20 CPU ns per path-step, measured in benchmarks/mc_throughput.py's units)
+_SHARED: L1State[int | None] = L1State(x_hat=0, eta=0, lam_hat=0, theta=0, step=None)
 
 
 def build_chunk_fn(
@@ -324,8 +337,9 @@ def _start_impl(key, idx, *, model, config, samplers):
         x0b = jax.vmap(lambda i: x0_bar_sampler(jax.random.fold_in(k_x0bar, i)))(idx)
     else:
         x0b = x0
-    x0 = x0.astype(jnp.float64)
-    x0b = x0b.astype(jnp.float64)
+    ftype = jnp.dtype(config.dtype)
+    x0 = x0.astype(jnp.float64).astype(ftype)
+    x0b = x0b.astype(jnp.float64).astype(ftype)
     xs = tuple(x0b if s in _TRUE_SCENARIOS else x0 for s in scen)
     zero = jnp.zeros(idx.shape, dtype=jnp.int8)
     # a non-finite or too large initial state is a divergence at t = 0
@@ -335,12 +349,66 @@ def _start_impl(key, idx, *, model, config, samplers):
         l1s = jax.vmap(l1_init, in_axes=(0, None), out_axes=_SHARED)(
             x0b, model.theta_ad(jnp.float64(0.0))
         )
+        l1s = jax.tree_util.tree_map(
+            lambda v: v.astype(ftype) if jnp.issubdtype(v.dtype, jnp.floating) else v, l1s
+        )
     return (xs, codes, l1s, idx), jnp.stack(xs)[None]
+
+
+@dataclass(frozen=True)
+class _Fields:
+    """The model's functions in the run's arithmetic (float64, or float32 end to end)."""
+
+    f: Callable
+    g: Callable
+    p: Callable
+    lam_mu: Callable
+    lam_sigma: Callable
+    expert: Callable
+    learned: Callable | None
+    theta_ad: Callable
+
+
+def _fields(model: SimModel, config: SimConfig) -> _Fields:
+    """``model``'s functions for ``config``: as they are in float64 (the learned policy in
+    float32 with ``policy_dtype="float32"``), or all of them re-evaluated in float32 with
+    ``dtype="float32"`` (:func:`drip_cert.sim.precision.in_dtype`: constants, weights, inputs
+    and outputs in float32)."""
+    learned = model.learned
+    if config.dtype == "float64":
+        if learned is not None and config.policy_dtype != "float64":
+            # opt-in: pi_IL's arithmetic in float32, its input and output float64
+            learned = lower_precision(learned, model.n, jnp.dtype(config.policy_dtype))
+        return _Fields(
+            model.f,
+            model.g,
+            model.p,
+            model.lam_mu,
+            model.lam_sigma,
+            model.expert,
+            learned,
+            model.theta_ad,
+        )
+    lo = jnp.dtype(config.dtype)
+    t = jnp.zeros((), jnp.float64)
+    x = jnp.zeros((model.n,), jnp.float64)
+    return _Fields(
+        f=in_dtype(model.f, (t, x), lo),
+        g=in_dtype(model.g, (t,), lo),
+        p=in_dtype(model.p, (t, x), lo),
+        lam_mu=in_dtype(model.lam_mu, (t, x), lo),
+        lam_sigma=in_dtype(model.lam_sigma, (t, x), lo),
+        expert=in_dtype(model.expert, (x,), lo),
+        learned=None if learned is None else in_dtype(learned, (x,), lo),
+        theta_ad=in_dtype(model.theta_ad, (t,), lo),
+    )
 
 
 def _advance_impl(key, carry, r0, *, model, config, records_per_call):
     """Records ``r0 + 1 .. r0 + records_per_call``: ``(carry, (records_per_call, S, B, n))``."""
-    model = model.obj
+    sim_model = model.obj
+    model = _fields(sim_model, config)
+    ftype = jnp.dtype(config.dtype)
     scen = config.scenarios
     dt = config.dt
     sqrt_dt = math.sqrt(dt)
@@ -348,7 +416,7 @@ def _advance_impl(key, carry, r0, *, model, config, records_per_call):
     stride = config.record_every
     l1p = config.l1
     has_noise = any(s in _NOISY_SCENARIOS for s in scen)
-    d = model.d
+    d = sim_model.d
     k_bm = jax.random.fold_in(key, 2)
 
     f_b = jax.vmap(model.f, in_axes=(None, 0))
@@ -357,14 +425,11 @@ def _advance_impl(key, carry, r0, *, model, config, records_per_call):
     known_diff_b = jax.vmap(model.p, in_axes=(None, 0))
     expert_b = jax.vmap(model.expert)
     learned = model.learned
-    if learned is not None and config.policy_dtype != "float64":
-        # opt-in: pi_IL's arithmetic in float32, its input and output float64 (sim/precision.py)
-        learned = lower_precision(learned, model.n, jnp.dtype(config.policy_dtype))
     learned_b = jax.vmap(learned) if learned is not None else None
     l1_b = (
         jax.vmap(
             lambda st, x, fk, g_t, th: l1_step(l1p, st, x, fk, g_t, th),
-            in_axes=(_SHARED, 0, 0, None, None),
+            in_axes=(_SHARED, 0, 0, None, 0),
             out_axes=(0, _SHARED),
         )
         if l1p is not None
@@ -376,13 +441,13 @@ def _advance_impl(key, carry, r0, *, model, config, records_per_call):
         return f_b(t, x) + policy_b(x) @ g_t.T
 
     def step(carry, j):
-        xs, codes, l1s, idx = carry
-        t = j.astype(jnp.float64) * dt
+        xs, codes, l1s, idx, buf = carry
+        t = (j.astype(jnp.float64) * dt).astype(ftype)
         g_t = model.g(t)
         new_xs, new_codes = [], []
         dw = None
         if has_noise:
-            dw = sqrt_dt * normals(k_bm, idx, j, d)
+            dw = sqrt_dt * normals(k_bm, idx, j, d, ftype)
         for i, s in enumerate(scen):
             x = xs[i]
             if s == "expert_nominal":
@@ -398,22 +463,27 @@ def _advance_impl(key, carry, r0, *, model, config, records_per_call):
                 x_new = x + dt * drift + noise
             else:  # learned_l1_true
                 fk = known_drift(t, x, g_t, learned_b)
-                u, l1s = l1_b(l1s, x, fk, g_t, model.theta_ad(t))
+                th = model.theta_ad(t)
+                u, l1s = l1_b(l1s, x, fk, g_t, jnp.broadcast_to(th, (x.shape[0], *th.shape)))
                 drift = fk + u @ g_t.T + lam_mu_b(t, x)
                 noise = jnp.einsum("bnd,bd->bn", diff_b(t, x), dw)
                 x_new = x + dt * drift + noise
             x_new, c_new = _guard(x, x_new, codes[i], inv_cap)
             new_xs.append(x_new)
             new_codes.append(c_new)
-        return (tuple(new_xs), tuple(new_codes), l1s, idx), None
+        # the state after step j goes to slot (j - j0) // stride; the last write into a slot is
+        # the state at its recorded time (an unconditional write: cheaper than a branch)
+        k = ((j - j0) // jnp.uint32(stride)).astype(jnp.int32)
+        zero = jnp.int32(0)
+        buf = jax.lax.dynamic_update_slice(buf, jnp.stack(new_xs)[None], (k, zero, zero, zero))
+        return (tuple(new_xs), tuple(new_codes), l1s, idx, buf), None
 
-    def record_block(carry, r):
-        js = (r * stride + jnp.arange(stride)).astype(jnp.uint32)
-        carry, _ = jax.lax.scan(step, carry, js)
-        return carry, jnp.stack(carry[0])
-
-    rs = r0 + jnp.arange(records_per_call, dtype=jnp.uint32)
-    return jax.lax.scan(record_block, carry, rs)
+    xs0 = carry[0]
+    buf0 = jnp.zeros((records_per_call, len(xs0), *xs0[0].shape), dtype=xs0[0].dtype)
+    j0 = r0 * jnp.uint32(stride)
+    js = j0 + jnp.arange(records_per_call * stride, dtype=jnp.uint32)
+    (xs, codes, l1s, idx, buf), _ = jax.lax.scan(step, (*carry, buf0), js)
+    return (xs, codes, l1s, idx), buf
 
 
 _start_jit = jax.jit(_start_impl, static_argnames=("model", "config", "samplers"))

@@ -63,7 +63,7 @@ def threefry2x32(key1, key2, x0, x1):
     return x0, x1
 
 
-def normals(keypair, idx, j, d: int):
+def normals(keypair, idx, j, d: int, dtype=jnp.float64):
     """Standard normals ``(B, d)`` for paths ``idx`` (uint32, ``(B,)``) at step ``j`` (uint32).
 
     Entry ``(b, c)`` hashes the counter pair ``(idx[b], j d + c)`` under ``keypair``; the high 53
@@ -71,9 +71,19 @@ def normals(keypair, idx, j, d: int):
     (-1, 1), and the normal is ``sqrt(2) erfinv(u)``. The smallest ``|u|`` away from the
     endpoints is ``1 - 2^-53``, so the largest normal is about 8.3: tails are exact to
     ``P(|Z| > 8.3) ~ 1e-16``.
+
+    ``dtype=float32`` (the float32 engine): the high 23 bits of the first word give
+    ``u = (k + 1/2) 2^-22 - 1`` (exact in float32) and ``z = sqrt(2) erfinv(u)`` in float32 (about
+    the resolution of ``jax.random.normal`` in float32; the largest normal is about 5.3,
+    ``P(|Z| > 5.3) ~ 1e-7``).
+    The same counters, so the same path sees a float32 rounding of the same Brownian increments.
     """
     w0, w1 = _counters(idx, j, d)
-    return _to_normal(*threefry2x32(keypair[0], keypair[1], w0, w1))
+    hi, lo = threefry2x32(keypair[0], keypair[1], w0, w1)
+    if jnp.dtype(dtype) == jnp.float32:
+        u = ((hi >> jnp.uint32(9)).astype(jnp.float32) + 0.5) * jnp.float32(2.0**-22) - 1.0
+        return jnp.float32(math.sqrt(2.0)) * jax.scipy.special.erfinv(u)
+    return _to_normal(hi, lo)
 
 
 def normals_via_jax(keypair, idx, j, d: int):

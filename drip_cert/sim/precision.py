@@ -28,7 +28,7 @@ from jax.extend import core as jcore
 
 from drip_cert._jax import jax, jnp
 
-__all__ = ["lower_precision"]
+__all__ = ["in_dtype", "lower_precision"]
 
 # call-like primitives whose body is evaluated inline (their semantics is "call this jaxpr")
 _INLINE = ("jit", "pjit", "closed_call", "core_call", "custom_jvp_call", "custom_vjp_call")
@@ -61,6 +61,27 @@ def lower_precision(fn: Callable, n_in: int, dtype: Any = jnp.float32) -> Callab
     def low(x):
         outs = _eval(closed.jaxpr, consts, [jnp.asarray(x).astype(lo)], lo)
         return outs[0].astype(jnp.float64)
+
+    return low
+
+
+def in_dtype(fn: Callable, examples: Sequence, dtype: Any = jnp.float32) -> Callable:
+    """``fn`` with every float64 input, constant, literal, dtype parameter and output in ``dtype``.
+
+    The float32-end-to-end engine (``SimConfig(dtype="float32")``) evaluates the model's vector
+    fields with this: ``fn`` is traced once on ``examples`` (float64 arrays of the call's shapes)
+    and its jaxpr evaluated as :func:`lower_precision` does, except that the inputs are cast to
+    ``dtype`` on the way in and the outputs stay in ``dtype``.
+    """
+    closed, shape = jax.make_jaxpr(fn, return_shape=True)(*examples)
+    out_tree = jax.tree_util.tree_structure(shape)
+    lo = np.dtype(dtype)
+    consts = [_narrow(c, lo) for c in closed.consts]
+
+    def low(*args):
+        outs = _eval(closed.jaxpr, consts, [_narrow(jnp.asarray(a), lo) for a in args], lo)
+        outs = [_narrow(o, lo) for o in outs]
+        return jax.tree_util.tree_unflatten(out_tree, outs)
 
     return low
 

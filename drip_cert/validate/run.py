@@ -160,6 +160,7 @@ def validate(
     run_dir: Path | None = None,
     backend: Any = None,
     policy_dtype: str = "float64",
+    dtype: str = "float64",
 ) -> ValidationReport:
     """Validate certificate ``cert`` of ``s`` (which must have a learned policy) by simulation.
 
@@ -170,7 +171,9 @@ def validate(
     ``backend`` (:class:`~drip_cert.sim.backend.Backend`, default local) runs the main
     simulation and changes no number. ``policy_dtype="float32"`` evaluates the learned policy
     of the main run in float32 (opt-in, faster); its effect on the gaps, measured on the first
-    paths against float64, is then a note and ``empirical["policy_dtype_effect"]``.
+    paths against float64, is then a note and ``empirical["policy_dtype_effect"]``;
+    ``dtype="float32"`` runs the whole simulation in float32 (states, noise, vector fields,
+    policy, L1-DRAC) and reports its effect as ``empirical["dtype_effect"]``.
 
     Returns
     -------
@@ -274,6 +277,7 @@ def validate(
         theta=theta,
         backend=backend,
         policy_dtype=policy_dtype,
+        dtype=dtype,
     )
     if has_known_diffusion(s):
         notes.append(
@@ -282,7 +286,7 @@ def validate(
             "(scenario nominal_sde, driven by the true processes' Brownian path), not the ODE x'"
         )
     effect = None
-    if policy_dtype != "float64":
+    if policy_dtype != "float64" or dtype != "float64":
         # on this machine: ~2 x 1000 paths, less than a cluster's start-up and compile
         effect = dtype_effect(s, res, x0_box=x0_box, theta=theta)
         notes.append(effect.note())
@@ -363,7 +367,7 @@ def validate(
         }
     emp["w2"] = [w.to_dict() for w in res.w2]
     if effect is not None:
-        emp["policy_dtype_effect"] = effect.to_dict()
+        emp["dtype_effect" if effect.end_to_end else "policy_dtype_effect"] = effect.to_dict()
     notes.append(
         "W2 estimates from samples are biased upward (see the same-law baselines "
         "beside each); they are reported, not checked against a bound"

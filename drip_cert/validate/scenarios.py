@@ -70,6 +70,7 @@ def run_scenarios(
     theta: np.ndarray | None = None,
     backend: Any = None,
     policy_dtype: str = "float64",
+    dtype: str = "float64",
 ):
     """Simulate the four scenarios of the DRIP paper for ``s`` (with its learned policy), and
     L1-DRAC's nominal SDE (4b) when ``s`` has a known diffusion (:func:`scenarios_for`).
@@ -77,7 +78,8 @@ def run_scenarios(
     Initial states are uniform on ``x0_box`` (default ``s.support``), mapped by ``theta`` when
     ``s`` is a system in coordinates ``z = theta x``; the gap statistics are then those of the
     user's ``x = theta^{-1} z`` (:attr:`~drip_cert.sim.config.SimConfig.gap_readout`).
-    ``backend`` (:class:`~drip_cert.sim.backend.Backend`) and ``policy_dtype`` go to the engine."""
+    ``backend`` (:class:`~drip_cert.sim.backend.Backend`), ``policy_dtype`` and ``dtype`` go to
+    the engine."""
     from drip_cert.sim.config import (  # jax: keep off the API's import path
         DEFAULT_SCENARIOS,
         SimConfig,
@@ -98,6 +100,7 @@ def run_scenarios(
         w2_points=min(2000, max(2, paths // 2)),
         gap_readout=None if theta is None else tuple(map(tuple, np.linalg.inv(theta))),
         policy_dtype=policy_dtype,
+        dtype=dtype,
         scenarios=scenarios_for(s, DEFAULT_SCENARIOS),
     )
     box = s.support if x0_box is None else x0_box
@@ -114,9 +117,10 @@ def run_scenarios(
 def dtype_effect(
     s: System, result: Any, *, x0_box: Any = None, theta: np.ndarray | None = None, backend=None
 ):
-    """The float32 policy's effect on the gaps of the run ``result`` of :func:`run_scenarios`,
-    measured on its first paths (:func:`~drip_cert.sim.dtype_effect.policy_dtype_effect`)."""
-    from drip_cert.sim.dtype_effect import policy_dtype_effect  # jax: keep off the import path
+    """The float32 path's effect (the policy alone, or end to end) on the gaps of the run
+    ``result`` of :func:`run_scenarios`, measured on its first paths against float64
+    (:func:`~drip_cert.sim.dtype_effect.dtype_effect`)."""
+    from drip_cert.sim.dtype_effect import dtype_effect as effect  # jax: keep off the import path
 
     box = s.support if x0_box is None else x0_box
-    return policy_dtype_effect(s.numeric, result.config, x0_sampler(box, theta), backend=backend)
+    return effect(s.numeric, result.config, x0_sampler(box, theta), backend=backend)
