@@ -133,7 +133,7 @@ def cmd_train(args: argparse.Namespace) -> int:
 
 
 def cmd_export_policy(args: argparse.Namespace) -> int:
-    from drip_cert.workflows import export_policy  # sympy, flint: off the start-up path
+    from drip_cert.workflows import export_policy  # flint: off the start-up path (sympy, onnx too)
 
     summary = export_policy(args.spec, args.out, dtype=args.dtype, block=args.block)
     if args.json:
