@@ -455,7 +455,7 @@ def _invariance(s: System, r: Any) -> InvariantSet | None:
 
     def F_num(z):
         z = jnp.asarray(z, dtype=jnp.float64)
-        return np.asarray(num.f(0.0, z) + num.g(0.0) @ num.expert(z))
+        return np.asarray(num.f(0.0, z) + num.g(0.0, z) @ num.expert(z))
 
     return best_invariant_set(
         s.closed_loop("expert"),

@@ -371,14 +371,19 @@ def _advance_impl(key, carry, r0, *, model, config, records_per_call):
         else None
     )
 
+    g_b = jax.vmap(model.g, in_axes=(None, 0))
+
     def known_drift(t, x, g_t, policy_b):
-        # f(t,x) + g(t) pi(x), batched: (B, n)
+        # f(t,x) + g(t, x) pi(x), batched: (B, n); g_t is g(t) shared by every path, or None
+        # when g depends on the state (then evaluated per path)
+        if g_t is None:
+            return f_b(t, x) + jnp.einsum("bnm,bm->bn", g_b(t, x), policy_b(x))
         return f_b(t, x) + policy_b(x) @ g_t.T
 
     def step(carry, j):
         xs, codes, l1s, idx = carry
         t = j.astype(jnp.float64) * dt
-        g_t = model.g(t)
+        g_t = None if model.g_state else model.g(t, jnp.zeros(model.n))
         new_xs, new_codes = [], []
         dw = None
         if has_noise:
