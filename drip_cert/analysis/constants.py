@@ -80,8 +80,13 @@ class InputConstants:
     min_singular_value: Quantity  #: a lower bound of inf_t sigma_min(g(t))
     g_perp: tuple[tuple[float, ...], ...]  #: at t = 0
     theta_ad: tuple[tuple[float, ...], ...]  #: at t = 0
+    #: g depends on the state: the L1-DRAC-only constants (g', Theta_ad) are not computed
+    state_dependent: bool = False
 
     def quantities(self) -> tuple[Quantity, ...]:
+        """The constants a certificate rests on (without the ones not computed for g(t, x))."""
+        if self.state_dependent:
+            return (self.Delta_g, self.Delta_g_spectral, self.Delta_g_perp)
         return (
             self.Delta_g,
             self.Delta_g_spectral,
@@ -328,6 +333,7 @@ def _input_constants_on_box(s: System, box: np.ndarray) -> InputConstants:
         min_singular_value=q("sigma_min_g", smin, "DRIP Assumption 1", text),
         g_perp=tuple(tuple(float(v) for v in row) for row in g_perp_at(s, 0.0, box.mean(axis=1))),
         theta_ad=tuple(tuple(math.nan for _ in range(n)) for _ in range(m)),
+        state_dependent=True,
     )
 
 
@@ -362,6 +368,9 @@ def uncertainty_constants(
     s: System, given: ConstantsTable | Mapping[str, Any] | None = None
 ) -> UncertaintyConstants:
     """Estimate (or take as given) the uncertainty and diffusion constants.
+
+    For a state-dependent ``g`` the matched / unmatched parts (``_par``, ``_perp``, L1-DRAC (7))
+    are absent: only L1-DRAC uses them, and it needs ``g(t)``.
 
     Parameters
     ----------
@@ -507,18 +516,8 @@ def uncertainty_constants(
 
 
 def _not_split(out: dict[str, Quantity], key: str) -> None:
-    """The matched / unmatched constants of L1-DRAC (7) for a state-dependent g: NaN, named (only
-    L1-DRAC uses them, and it needs g(t))."""
-    for sub in ("_par", "_perp"):
-        for nm in (f"Delta_{key}{sub}", f"L_{key}{sub}", f"L_{key}{sub}_hat"):
-            out[nm] = Quantity(
-                nm,
-                math.nan,
-                How.ESTIMATE,
-                "L1-DRAC (7)",
-                "not computed: g depends on the state, and the matched / unmatched split of "
-                "L1-DRAC (7) needs g(t)",
-            )
+    """The matched / unmatched constants of L1-DRAC (7) for a state-dependent g: not computed
+    (absent; only L1-DRAC uses them, and it needs g(t))."""
 
 
 def _depends_on_t(s: System) -> bool:

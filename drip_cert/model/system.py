@@ -473,6 +473,68 @@ class System:
             blocks=self.blocks,
         )
 
+    @classmethod
+    def from_statespace(
+        cls,
+        sys_or_AB: Any,
+        *,
+        expert: Any,
+        support: Sequence[Sequence[float]],
+        horizon: float,
+        states: Sequence[str] | None = None,
+        inputs: Sequence[str] | None = None,
+        name: str = "statespace",
+        learned: Any = None,
+        **uncertainty: Any,
+    ) -> System:
+        """A linear system ``dx/dt = A x + B u`` from a state-space object or ``(A, B)`` arrays.
+
+        Parameters
+        ----------
+        sys_or_AB
+            Anything with attributes ``.A`` and ``.B`` (``control.ss(...)``,
+            ``scipy.signal.StateSpace``; continuous time: a ``.dt`` other than ``None``/``0``
+            is refused), or a pair ``(A, B)`` of arrays. Read by duck typing: python-control
+            is never imported. Every entry is taken as the exact rational of its double
+            (:func:`~drip_cert.model.literals.exact_number`), as the TOML route
+            (``[dynamics] A, B``, :mod:`drip_cert.spec.linear`) takes its decimals.
+        expert, learned
+            A gain matrix ``K`` (``m x n`` numbers: the policy ``u = -K x``, the sign of
+            ``control.lqr`` and ``scipy``), a list of ``m`` expressions (sympy, or text in the
+            state names), or (``learned`` only) an :class:`~drip_cert.model.mlp.MLP` (a block
+            named ``pi_il``).
+        support, horizon
+            The initial law's support box and ``T``, as for :class:`System`.
+        states, inputs
+            Names; default: the object's ``state_labels`` / ``input_labels`` when it has them
+            (python-control >= 0.10), else ``x1..xn`` / ``u1..um``.
+        name
+            Label for reports.
+        **uncertainty
+            ``lambda_mu``, ``lambda_sigma``, ``diffusion`` (expressions or text),
+            ``Delta_mu``, ``Delta_sigma``, ``brownian_dim``, ``true_support``: as for
+            :class:`System`.
+
+        Returns
+        -------
+        System
+            ``f = A x``, ``g = B``, the expert (and learned) policies.
+        """
+        from drip_cert.model.statespace import statespace_system  # same layer, one concept
+
+        return statespace_system(
+            cls,
+            sys_or_AB,
+            expert=expert,
+            support=support,
+            horizon=horizon,
+            states=states,
+            inputs=inputs,
+            name=name,
+            learned=learned,
+            **uncertainty,
+        )
+
     def with_learned(
         self, learned: Sequence[sp.Expr] | sp.MatrixBase, blocks: Mapping[str, Block] | None = None
     ) -> System:
