@@ -27,6 +27,7 @@ import sympy as sp
 from drip_cert.errors import SpecError
 from drip_cert.model.blocks import Block, block_applications
 from drip_cert.model.lower import lower
+from drip_cert.model.statespace import statespace_system
 from drip_cert.numerics.rounding import mul_up, sqrt_up, sum_sq_up
 
 if TYPE_CHECKING:
@@ -520,8 +521,6 @@ class System:
         System
             ``f = A x``, ``g = B``, the expert (and learned) policies.
         """
-        from drip_cert.model.statespace import statespace_system  # same layer, one concept
-
         return statespace_system(
             cls,
             sys_or_AB,
