@@ -15,6 +15,7 @@ per system); :func:`make_model` builds one from plain jax functions. Nothing her
 
 from __future__ import annotations
 
+import inspect
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -200,8 +201,9 @@ def make_model(
     """Build a :class:`SimModel` from plain jax functions, filling the optional ones.
 
     ``p``, ``lam_mu`` and ``lam_sigma`` default to zero; ``theta_ad`` defaults to
-    :func:`theta_ad_from_g`. ``g`` is a callable ``g(t, x)`` or a constant ``(n, m)`` array;
-    ``g_state`` says whether the callable depends on ``x``.
+    :func:`theta_ad_from_g`. ``g`` is a callable ``g(t, x)``, a callable of one argument
+    ``g(t)`` (the form before state-dependent input operators; wrapped) or a constant ``(n, m)``
+    array; ``g_state`` says whether the callable depends on ``x``.
 
     Returns
     -------
@@ -216,6 +218,12 @@ def make_model(
 
         def g(t, x):
             return g_const
+
+    elif _positional_arity(g) == 1:
+        g_of_t = g
+
+        def g(t, x):
+            return g_of_t(t)
 
     def _zero_drift(t, x):
         return jnp.zeros((n,), dtype=jnp.float64)
@@ -237,4 +245,19 @@ def make_model(
         theta_ad=theta_ad if theta_ad is not None else theta_ad_from_g(g, n),
         name=name,
         g_state=g_state,
+    )
+
+
+def _positional_arity(fn: Callable) -> int | None:
+    """The number of positional parameters of ``fn`` (``None`` when unknown or variadic)."""
+    try:
+        params = inspect.signature(fn).parameters.values()
+    except (TypeError, ValueError):
+        return None
+    kinds = [p.kind for p in params]
+    if inspect.Parameter.VAR_POSITIONAL in kinds:
+        return None
+    return sum(
+        k in (inspect.Parameter.POSITIONAL_ONLY, inspect.Parameter.POSITIONAL_OR_KEYWORD)
+        for k in kinds
     )
