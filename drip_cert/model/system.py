@@ -331,12 +331,13 @@ class System:
         ``g^T v = g^T g a``, so the first m rows of ``gbar^{-1}`` are the pseudo-inverse of ``g``
         whatever basis ``g_perp`` is chosen (docs/math/l1drac.md).
         """
+        if self.g_depends_on_x:
+            raise SpecError(
+                "Theta_ad is L1-DRAC's and needs g(t); this g depends on the state",
+                field="dynamics.g",
+            )
         g = sp.Matrix(self.g)
         gtg = g.T * g
-        if self.g_depends_on_x:
-            # only the L1-DRAC layer reads it, and that layer is not applicable to g(t, x):
-            # no simplification (it can be slow on trigonometric entries)
-            return sp.ImmutableMatrix(gtg.inv(method="LU") * g.T)
         inv = gtg.inv() if self.g_is_constant else sp.simplify(gtg.inv())
         return sp.ImmutableMatrix(sp.simplify(inv * g.T))
 
@@ -364,12 +365,17 @@ class System:
         engine share.
         """
         from drip_cert._jax import jnp  # jax: keep off the CLI start-up path
-        from drip_cert.model.numeric import SimModel  # jax: keep off the CLI start-up path
+        from drip_cert.model.numeric import (  # jax: keep off the CLI start-up path
+            SimModel,
+            theta_ad_from_g,
+        )
 
         n, d = self.n, self.d
         g_fn = self.lower(self.g)
         exp_fn = self.lower(list(self.expert))
-        th = self.lower(self.theta_ad)
+        # Theta_ad is L1-DRAC's (needs g(t)): for g(t, x) the numeric pseudo-inverse at x = 0
+        # only fills the view (never used: the engine and the controller refuse L1 for g(x))
+        th = None if self.g_depends_on_x else self.lower(self.theta_ad)
         learned = None if self.learned is None else self.lower(list(self.learned))
         return SimModel(
             n=n,
@@ -391,7 +397,7 @@ class System:
             ),
             expert=lambda x: exp_fn(0.0, x),
             learned=None if learned is None else (lambda x: learned(0.0, x)),
-            theta_ad=lambda t: th(t, jnp.zeros(n)),
+            theta_ad=(theta_ad_from_g(g_fn, n) if th is None else (lambda t: th(t, jnp.zeros(n)))),
             name=self.name,
             jac_expert=self.lower(self.closed_loop_jacobian("expert")),
             jac_learned=(
