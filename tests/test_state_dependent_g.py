@@ -167,3 +167,18 @@ def test_sup_over_an_unproved_set_makes_the_result_conditional():
     a1 = next(c for c in cert.assumptions if c.id == "DRIP-A1")
     assert a1.holds and not a1.scope_ok
     assert "g depends on the state" in a1.scope_reason
+
+
+@pytest.mark.slow  # certify + a Monte-Carlo run with its compile: ~16 s on a loaded 2-core machine
+def test_validation_simulates_no_l1drac_process_and_says_why():
+    from drip_cert.validate.run import validate
+
+    s = _system(learned=[-X2 + sp.Rational(1, 50) * sp.tanh(X1)])
+    report = validate(s, paths=64, seed=0)
+    assert "learned_l1_true" not in report.result.config.scenarios
+    by_name = {c["name"]: c for c in report.to_dict()["checks"]}
+    for name in ("uncertainty_gap", "tail_frequency", "total_tail"):
+        assert by_name[name]["status"] == "not_checked"
+        assert "g depends on the state" in by_name[name]["reason"]
+    # the DRIP processes are simulated with g(x) (the engine test above checks their values)
+    assert report.result.gap("policy").n == 64
