@@ -102,10 +102,10 @@ def test_blocks_are_composed_and_numerics_agree():
     rng = np.random.default_rng(1)
     for z in rng.normal(size=(5, 2)):
         x = Ti @ z
-        fx = np.asarray(s.numeric.f(0.0, x)) + np.asarray(s.numeric.g(0.0)) @ np.asarray(
+        fx = np.asarray(s.numeric.f(0.0, x)) + np.asarray(s.numeric.g(0.0, x)) @ np.asarray(
             s.numeric.expert(x)
         )
-        fz = np.asarray(Z.numeric.f(0.0, z)) + np.asarray(Z.numeric.g(0.0)) @ np.asarray(
+        fz = np.asarray(Z.numeric.f(0.0, z)) + np.asarray(Z.numeric.g(0.0, z)) @ np.asarray(
             Z.numeric.expert(z)
         )
         np.testing.assert_allclose(fz, THETA @ fx, rtol=FLOAT_RTOL, atol=FLOAT_RTOL)

@@ -464,7 +464,7 @@ def test_theta_ad_default_equals_first_rows_of_gbar_inverse():
     g = np.array([[1.0, 0.2], [0.0, 1.0], [0.5, -0.3], [0.1, 0.0]])
     g_perp = np.linalg.svd(g)[0][:, 2:]
     direct = np.linalg.inv(np.hstack([g, g_perp]))[:2]
-    via_pinv = np.asarray(theta_ad_from_g(lambda t: jnp.asarray(g))(0.0))
+    via_pinv = np.asarray(theta_ad_from_g(lambda t, x: jnp.asarray(g), 4)(0.0))
     np.testing.assert_allclose(via_pinv, direct, rtol=0, atol=THETA_ATOL)
 
 

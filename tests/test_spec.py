@@ -52,7 +52,7 @@ def test_paper_example_loads_and_expert_cancels_h():
     [
         ('f = ["x2", "-x1 - x2**3"]', 'f = ["x2", "-x1 - y"]', "dynamics.f[1]", "unknown symbol"),
         ('f = ["x2", "-x1 - x2**3"]', 'f = ["x2"]', "dynamics.f", "2 entries"),
-        ('g = [["0"], ["1"]]', 'g = [["0"], ["x1"]]', "dynamics.g[1][0]", "depends on the state"),
+        ('g = [["0"], ["1"]]', 'g = [["0"], ["x1"]]', "dynamics.g", "rank 0"),
         (
             'g = [["0"], ["1"]]\n[policy]\nexpert = ["-x1 - 2*x2"]',
             'g = [["1", "2"], ["2", "4"]]\n[policy]\nexpert = ["-x1", "-x2"]',

@@ -6,7 +6,11 @@ Each constant is a :class:`~drip_cert.provenance.Quantity` that records how it w
 * input operator ``g``: for a constant ``g`` every constant is exact (closed form, outward
   rounded); for a time-varying ``g`` the sup over ``t in [0, T]`` is a rigorous interval bound
   over :data:`TIME_PIECES` pieces of ``[0, T]`` (sound, scope ``t in [0, T]``); the unmatched
-  parts use the projector ``P_perp(t) = I - g(t) Theta_ad(t)``, a closed form in ``t``;
+  parts use the projector ``P_perp(t) = I - g(t) Theta_ad(t)``, a closed form in ``t``; for a
+  state-dependent ``g(t, x)`` the suprema (and the infimum of ``sigma_min``) are taken over a box
+  the caller names (the set the trajectories are proved to stay in), by interval branch and
+  bound (sound, scope that box), and the L1-DRAC-only constants (``g'``, ``Theta_ad``) are not
+  computed (docs/math/contraction.md section 6);
 * ``Theta_ad = [I_m 0] gbar^{-1}``: with ``g_perp`` an orthonormal basis of ``ker g^T`` this is
   the pseudo-inverse ``(g^T g)^{-1} g^T`` (the matched part does not depend on the choice of
   ``g_perp``), computed symbolically;
@@ -33,15 +37,22 @@ import sympy as sp
 from drip_cert.analysis.growth import growth_bound, holder_half_bound, lipschitz_bound, sup_bound
 from drip_cert.analysis.lognorm import mu2_interval_upper
 from drip_cert.model.system import System
-from drip_cert.numerics.interval import enclose_expr, interval_add, interval_mul
+from drip_cert.numerics.bnb import maximize
+from drip_cert.numerics.interval import (
+    MatrixEnclosure,
+    UnsupportedExpression,
+    enclose_expr,
+    interval_add,
+    interval_mul,
+)
 from drip_cert.numerics.rounding import mul_up, sqrt_down, sqrt_up, sum_sq_up
 from drip_cert.provenance import How, Quantity, Scope
 from drip_cert.spec.settings import ConstantsTable
 
 
-def g_perp_at(s: System, t: float = 0.0) -> np.ndarray:
-    """Orthonormal basis of ``ker g(t)^T`` (n x (n-m)), from the SVD of ``g(t)``."""
-    G = s.g_at(t)
+def g_perp_at(s: System, t: float = 0.0, x: np.ndarray | None = None) -> np.ndarray:
+    """Orthonormal basis of ``ker g(t, x)^T`` (n x (n-m)), from the SVD of ``g(t, x)``."""
+    G = s.g_at(t, x)
     u, _, _ = np.linalg.svd(G, full_matrices=True)
     return u[:, s.m :]
 
@@ -69,8 +80,13 @@ class InputConstants:
     min_singular_value: Quantity  #: a lower bound of inf_t sigma_min(g(t))
     g_perp: tuple[tuple[float, ...], ...]  #: at t = 0
     theta_ad: tuple[tuple[float, ...], ...]  #: at t = 0
+    #: g depends on the state: the L1-DRAC-only constants (g', Theta_ad) are not computed
+    state_dependent: bool = False
 
     def quantities(self) -> tuple[Quantity, ...]:
+        """The constants a certificate rests on (without the ones not computed for g(t, x))."""
+        if self.state_dependent:
+            return (self.Delta_g, self.Delta_g_spectral, self.Delta_g_perp)
         return (
             self.Delta_g,
             self.Delta_g_spectral,
@@ -140,13 +156,19 @@ def _sigma_min_down(lo: np.ndarray, hi: np.ndarray) -> float:
     return sqrt_down(lam_min) if lam_min > 0 else 0.0
 
 
-def input_constants(s: System) -> InputConstants:
+def input_constants(s: System, box: Any = None) -> InputConstants:
     """Compute :class:`InputConstants` with rigorous bounds.
 
     For a constant ``g`` the entries are enclosed once (exact closed forms, outward rounded:
     ``how = exact``); for a time-varying ``g`` the suprema over ``[0, T]`` are interval bounds over
-    :data:`TIME_PIECES` pieces (``how = sound``, scope ``t in [0, T]``).
+    :data:`TIME_PIECES` pieces (``how = sound``, scope ``t in [0, T]``). For a state-dependent
+    ``g(t, x)`` ``box`` (n pairs ``(lo, hi)``) is required: the suprema are over
+    ``box x [0, T]`` (:func:`_input_constants_on_box`).
     """
+    if s.g_depends_on_x:
+        if box is None:
+            raise ValueError("g depends on the state: give the box the sup is taken over")
+        return _input_constants_on_box(s, np.asarray(box, dtype=float))
     g = sp.Matrix(s.g)
     th = sp.Matrix(s.theta_ad)
     gdot = g.diff(s.t)
@@ -204,6 +226,117 @@ def input_constants(s: System) -> InputConstants:
     )
 
 
+#: sub-boxes the branch and bound of one supremum of a state-dependent g may evaluate (a count
+#: of work: the same box gives the same bound on any machine; the bound is sound at any count)
+G_MAX_BOXES = 400
+#: the branch and bound stops when its bound is within this relative distance of a sampled value
+G_RTOL = 1e-3
+
+
+def _box_sup(
+    enc: MatrixEnclosure, norm: Callable[[np.ndarray, np.ndarray], float], box: np.ndarray
+) -> tuple[float, float, int]:
+    """``(upper, sampled lower, boxes)`` of ``sup_{v in box} norm(M(v))`` by branch and bound on
+    the entry-wise enclosures of ``M`` (``norm(lo, hi)`` an upper bound of the norm over the
+    interval matrix; at a point box it is the norm rounded up, the sampled value)."""
+
+    def upper(b: np.ndarray) -> float:
+        try:
+            return norm(*enc(b))
+        except (UnsupportedExpression, ZeroDivisionError, OverflowError, ValueError):
+            return math.inf
+
+    def value(p: np.ndarray) -> float:
+        pb = np.stack([p, p], axis=1)
+        try:
+            return norm(*enc(pb))
+        except (UnsupportedExpression, ZeroDivisionError, OverflowError, ValueError):
+            return math.nan
+
+    res = maximize(box, upper, value, rtol=G_RTOL, max_boxes=G_MAX_BOXES, corners=True)
+    return res.upper, res.lower, res.n_boxes
+
+
+def _input_constants_on_box(s: System, box: np.ndarray) -> InputConstants:
+    """:class:`InputConstants` of a state-dependent ``g(t, x)`` over ``box x [0, T]``.
+
+    Every supremum is an interval branch and bound (:func:`drip_cert.numerics.bnb.maximize`) of
+    an upper bound of the norm over the entry-wise enclosure of ``g`` on a sub-box (Frobenius:
+    :func:`_fro_up`; spectral: the smaller of :func:`_spectral_up` and :func:`_fro_up`); the
+    smallest singular value is bounded below the same way (the branch and bound maximises
+    ``-sigma_min``). Labels: ``sound``, scope ``box`` (and ``[0, T]`` when g depends on ``t``).
+    ``Delta_g_perp = sqrt(n - m)`` holds for an orthonormal basis at every point, as for
+    ``g(t)``. ``g'`` and ``Theta_ad`` enter only L1-DRAC, which needs ``g(t)``: NaN, named.
+    """
+    n, m = s.n, s.m
+    g = sp.Matrix(s.g)
+    has_t = any(e.has(s.t) for e in g)
+    t_rng = (0.0, float(s.horizon)) if has_t else (0.0, 0.0)
+    variables = [*s.states, s.t]
+    full = np.vstack([box, np.array([t_rng])])
+    enc = MatrixEnclosure(g, variables)
+    scope = Scope(tuple((float(a), float(b)) for a, b in box), t_rng if has_t else None)
+    fro, fro_lo, k1 = _box_sup(enc, _fro_up, full)
+    spec, spec_lo, k2 = _box_sup(
+        enc, lambda lo, hi: min(_spectral_up(lo, hi), _fro_up(lo, hi)), full
+    )
+    neg_smin, _, k3 = _box_sup(enc, lambda lo, hi: -_sigma_min_down(lo, hi), full)
+    smin = max(0.0, -neg_smin)
+    where = f"x in {[[float(a), float(b)] for a, b in box]}" + (
+        f", t in [0, {s.horizon:g}]" if has_t else ""
+    )
+    text = (
+        f"g depends on the state: interval branch and bound over {where} (at most "
+        f"{G_MAX_BOXES} sub-boxes each)"
+    )
+
+    def q(name: str, value: float, source: str, note: str) -> Quantity:
+        return Quantity.derive(name, value, method=How.SOUND, source=source, note=note, scope=scope)
+
+    def na(name: str, source: str) -> Quantity:
+        return Quantity(
+            name,
+            math.nan,
+            How.ESTIMATE,
+            source,
+            "not computed: g depends on the state, and only L1-DRAC (which needs g(t)) uses it",
+        )
+
+    return InputConstants(
+        Delta_g=q(
+            "Delta_g",
+            fro,
+            "DRIP Assumption 1 (Frobenius)",
+            f"{text}; sampled sup {fro_lo:.6g} ({k1} boxes)",
+        ),
+        Delta_g_spectral=q(
+            "Delta_g_spectral",
+            spec,
+            "spectral-norm bound of g (this project)",
+            f"{text}; sampled sup {spec_lo:.6g} ({k2} boxes)",
+        ),
+        Delta_g_dot=na("Delta_g_dot", "L1-DRAC Assumption 1"),
+        Delta_g_perp=Quantity.derive(
+            "Delta_g_perp",
+            sqrt_up(float(n - m)),
+            source="L1-DRAC Assumption 1",
+            note="orthonormal g_perp: ||g_perp||_F = sqrt(n - m)",
+        ),
+        Delta_Theta=na("Delta_Theta", "L1-DRAC Assumption 1"),
+        Theta_spectral=na("Theta_spectral", "L1-DRAC Assumption 1 (spectral norm)"),
+        rank=q(
+            "rank_g",
+            float(m if smin > 0 else 0),
+            "DRIP Assumption 1",
+            f"sigma_min(g(t, x)) >= {smin:.6g} on {where} ({k3} boxes)",
+        ),
+        min_singular_value=q("sigma_min_g", smin, "DRIP Assumption 1", text),
+        g_perp=tuple(tuple(float(v) for v in row) for row in g_perp_at(s, 0.0, box.mean(axis=1))),
+        theta_ad=tuple(tuple(math.nan for _ in range(n)) for _ in range(m)),
+        state_dependent=True,
+    )
+
+
 # ---------------------------------------------------------------------- sampled sup estimates
 def batch_fn(s: System, exprs: sp.MatrixBase) -> Callable[[float, np.ndarray], np.ndarray]:
     """numpy-facing batched evaluation ``(t, X (N, n)) -> (N, ...)`` of system expressions."""
@@ -236,6 +369,9 @@ def uncertainty_constants(
 ) -> UncertaintyConstants:
     """Estimate (or take as given) the uncertainty and diffusion constants.
 
+    For a state-dependent ``g`` the matched / unmatched parts (``_par``, ``_perp``, L1-DRAC (7))
+    are absent: only L1-DRAC uses them, and it needs ``g(t)``.
+
     Parameters
     ----------
     s
@@ -250,9 +386,11 @@ def uncertainty_constants(
     given = dict(given.values)
     n, m = s.n, s.m
     times = np.array([0.0]) if not _depends_on_t(s) else np.array([0.0, float(s.horizon)])
-    th = s.theta_ad
-    pperp = s.perp_projector
-    ic = input_constants(s)
+    # the matched / unmatched parts (L1-DRAC (7)) exist only for g(t): L1-DRAC's split
+    g_x = s.g_depends_on_x
+    th = None if g_x else s.theta_ad
+    pperp = None if g_x else s.perp_projector
+    theta_spectral = None if g_x else input_constants(s).Theta_spectral
     out: dict[str, Quantity] = {}
 
     def put(name: str, value: float, how: How, source: str, nt: str, scope=None) -> None:
@@ -292,10 +430,13 @@ def uncertainty_constants(
                     f"Delta_{key}", given_bound, How.GIVEN, growth_src, "given in [uncertainty]"
                 )
                 put(gb.name, gb.value, gb.how, growth_src, gb.note)
+                if theta_spectral is None:
+                    _not_split(out, key)
+                    continue
                 par = Quantity.derive(
                     f"Delta_{key}_par",
-                    mul_up(ic.Theta_spectral.value, given_bound),
-                    inputs=[ic.Theta_spectral, gb],
+                    mul_up(theta_spectral.value, given_bound),
+                    inputs=[theta_spectral, gb],
                     note="sup_t ||Theta_ad(t)||_2 * Delta (only the bound is known)",
                 )
                 put(par.name, par.value, par.how, growth_src + " / (7)", par.note)
@@ -325,13 +466,18 @@ def uncertainty_constants(
                 put(f"L_{key}{sub}_hat", 0.0, How.EXACT, hat_src, "no such term")
             continue
         full = sp.Matrix(mat)
-        par = sp.Matrix(th) * full
-        # the unmatched part g_perp^T Lambda has the norms of P_perp Lambda (see
-        # System.perp_projector): a closed form in t also for a time-varying g
-        perp = sp.Matrix(pperp) * full if n > m else None
+        parts_of: tuple[tuple[str, sp.Matrix | None], ...] = (("", full),)
+        if th is not None and pperp is not None:
+            par = sp.Matrix(th) * full
+            # the unmatched part g_perp^T Lambda has the norms of P_perp Lambda (see
+            # System.perp_projector): a closed form in t also for a time-varying g
+            perp = sp.Matrix(pperp) * full if n > m else None
+            parts_of += (("_par", par), ("_perp", perp))
+        else:
+            _not_split(out, key)
         t_sym = s.t if len(times) > 1 else None
         t_rng = (0.0, float(s.horizon)) if len(times) > 1 else (0.0, 0.0)
-        for sub, expr in (("", full), ("_par", par), ("_perp", perp)):
+        for sub, expr in parts_of:
             if expr is None:
                 put(
                     f"Delta_{key}{sub}",
@@ -367,6 +513,11 @@ def uncertainty_constants(
                 )
             put(L.name, L.value, L.how, lip_src, L.note, L.scope)
     return UncertaintyConstants(values=out)
+
+
+def _not_split(out: dict[str, Quantity], key: str) -> None:
+    """The matched / unmatched constants of L1-DRAC (7) for a state-dependent g: not computed
+    (absent; only L1-DRAC uses them, and it needs g(t))."""
 
 
 def _depends_on_t(s: System) -> bool:

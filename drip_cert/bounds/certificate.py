@@ -473,25 +473,30 @@ def _rate_check(cid: str, r: Any, what: str, source: str) -> Check:
     )
 
 
-def _invariance(s: System, r: Any) -> InvariantSet | None:
+def _invariance(s: System, r: Any, g_box: np.ndarray | None = None) -> InvariantSet | None:
     """A forward-invariant ball inside the box where the expert's rate is proved (None when the
-    rate is global or not positive)."""
-    if r.scope.all_x or not r.holds or not r.how.proved:
+    rate is global or not positive). For a state-dependent g (``g_box``: the box its sups are
+    taken over) a global rate still needs one inside that box."""
+    if not r.holds or not r.how.proved or (r.scope.all_x and g_box is None):
         return None
+    scope = r.scope
+    if scope.all_x:
+        assert g_box is not None
+        scope = Scope(tuple((float(a), float(b)) for a, b in g_box), scope.t_range)
     from drip_cert._jax import jnp  # jax: keep off the API's import path
 
     num = s.numeric
 
     def F_num(z):
         z = jnp.asarray(z, dtype=jnp.float64)
-        return np.asarray(num.f(0.0, z) + num.g(0.0) @ num.expert(z))
+        return np.asarray(num.f(0.0, z) + num.g(0.0, z) @ num.expert(z))
 
     return best_invariant_set(
         s.closed_loop("expert"),
         s.states,
         s.t,
         r.rate,
-        r.scope,
+        scope,
         np.asarray(s.support, dtype=float),
         s.horizon,
         F_num,
@@ -676,12 +681,15 @@ def _certify_in(spec: Spec, demonstrations: DemonstrationSet | None, stage: Stag
     opts = settings.contraction  # validated at load (its region contains the support)
     given = settings.constants
     stage("input and uncertainty constants (growth, Lipschitz, Hoelder bounds)")
-    ic = input_constants(s)
+    # a state-dependent g: every sup ||g|| over the box where the expert's rate is computed, the
+    # set the trajectories must be proved to stay in (docs/math/contraction.md section 6)
+    g_box = _g_box(s, opts)
+    ic = input_constants(s, g_box)
     uc = uncertainty_constants(s, given)
     notes: list[str] = list(spec.notes)  # how the spec defined the system (a K / LQR expert)
     checks: list[Check] = []
     extra_q: list[Quantity] = []
-    wants_l1 = "l1drac" in settings.present
+    wants_l1 = "l1drac" in settings.present and g_box is None
 
     a1_inputs = [ic.Delta_g, uc["Delta_mu"], uc["Delta_sigma"]]
     a1_finite = all(math.isfinite(q.value) for q in a1_inputs)
@@ -709,7 +717,9 @@ def _certify_in(spec: Spec, demonstrations: DemonstrationSet | None, stage: Stag
     ce = analyse_contraction(s, "expert", opts)
     r = ce.euclidean
     stage("forward-invariant set (where the expert's rate is used)")
-    inv = _invariance(s, r)
+    inv = _invariance(s, r, g_box)
+    if g_box is not None:
+        checks[-1] = checks[-1].with_scope(*_g_scope(g_box, inv))
     a2 = _rate_check("DRIP-A2", r, "expert closed loop", "DRIP Assumption 2")
     checks.append(a2.with_scope(*_expert_scope(r, inv, s.horizon)))
     lam_ex = r.to_quantity()
@@ -728,31 +738,12 @@ def _certify_in(spec: Spec, demonstrations: DemonstrationSet | None, stage: Stag
         if wants_l1:
             checks.append(a2l.with_scope(*_sde_scope(rl.scope, s.horizon)))
     src = cl if cl is not None else ce
-    lam_l1 = src.euclidean.to_quantity()
-    dgp = ic.Delta_g_perp
-    mu_perp, l_perp = uc["Delta_mu_perp"], uc["L_mu_perp"]
-    mperp = Quantity.derive(
-        "max(Delta_mu_perp, L_mu_perp)",
-        _nan_max(mu_perp.value, l_perp.value),
-        inputs=[mu_perp, l_perp],
-    )
-    rhs7 = Quantity.derive(
-        "Delta_g_perp * max(Delta_mu_perp, L_mu_perp)",
-        mul_up(dgp.value, mperp.value),
-        inputs=[dgp, mperp],
-    )
-    a7 = Check.compare(
-        "L1DRAC-A7",
-        rhs7,
-        lam_l1,
-        f"unmatched small gain: lambda = {lam_l1.value:.6g} > Delta_g_perp * max(Delta_mu_perp, "
-        f"L_mu_perp) = {dgp.value:.6g} * {mperp.value:.6g} = {rhs7.value:.6g}",
-        strict=True,
-        source="L1-DRAC Assumption 7",
-    )
     skipped: list[tuple[str, str, str]] = []
     if wants_l1:
+        a7 = _unmatched_check(src.euclidean.to_quantity(), ic, uc)
         checks.append(a7.with_scope(*_sde_scope(a7.scope, s.horizon)))
+    elif g_box is not None:
+        skipped.append(("l1drac", "not_applicable", G_X_L1_REASON))
     else:
         skipped.append(
             (
@@ -872,7 +863,7 @@ def _certify_in(spec: Spec, demonstrations: DemonstrationSet | None, stage: Stag
             rhs=math.inf,
             source="docs/math/tasil.md sections 3-4 (this project's construction)",
         )
-        checks.append(tcheck.with_scope(*_tasil_scope(r, inv, tasil, s.horizon)))
+        checks.append(tcheck.with_scope(*_tasil_scope(r, inv, tasil, s.horizon, g_box)))
     l1 = None
     if wants_l1:
         stage("L1-DRAC constants, design and its verification in Arb")
@@ -948,6 +939,31 @@ def _certify_in(spec: Spec, demonstrations: DemonstrationSet | None, stage: Stag
         extra_quantities=tuple(extra_q),
         skipped=tuple(skipped),
         fingerprint=fingerprint_of(s, _deployed_design(l1)),
+    )
+
+
+def _unmatched_check(lam_l1: Quantity, ic: InputConstants, uc: UncertaintyConstants) -> Check:
+    """L1-DRAC Assumption 7: ``lambda > Delta_g_perp * max(Delta_mu_perp, L_mu_perp)``."""
+    dgp = ic.Delta_g_perp
+    mu_perp, l_perp = uc["Delta_mu_perp"], uc["L_mu_perp"]
+    mperp = Quantity.derive(
+        "max(Delta_mu_perp, L_mu_perp)",
+        _nan_max(mu_perp.value, l_perp.value),
+        inputs=[mu_perp, l_perp],
+    )
+    rhs7 = Quantity.derive(
+        "Delta_g_perp * max(Delta_mu_perp, L_mu_perp)",
+        mul_up(dgp.value, mperp.value),
+        inputs=[dgp, mperp],
+    )
+    return Check.compare(
+        "L1DRAC-A7",
+        rhs7,
+        lam_l1,
+        f"unmatched small gain: lambda = {lam_l1.value:.6g} > Delta_g_perp * max(Delta_mu_perp, "
+        f"L_mu_perp) = {dgp.value:.6g} * {mperp.value:.6g} = {rhs7.value:.6g}",
+        strict=True,
+        source="L1-DRAC Assumption 7",
     )
 
 
@@ -1061,16 +1077,27 @@ def _input_gain(
     )
 
 
-def _tasil_scope(r: Any, inv: InvariantSet | None, tasil: Any, horizon: float) -> tuple[bool, str]:
+def _tasil_scope(
+    r: Any, inv: InvariantSet | None, tasil: Any, horizon: float, g_box: np.ndarray | None = None
+) -> tuple[bool, str]:
     """The TaSIL bound uses the rate along the learned trajectory: it must stay where the rate
     (and L_Delta) hold. With a proved invariant ball the lemma's tube condition (gap <= R, R
-    below the ball's room) keeps it there."""
+    below the ball's room) keeps it there. A state-dependent g (``g_box``) asks the same of a
+    global rate: the gains use ``sup ||g||`` over ``g_box`` only."""
     ok, why = _expert_scope(r, inv, horizon)
     if not ok:
         return ok, why + "; the learned trajectories are not shown to stay in the box"
-    if r.scope.all_x:
+    if r.scope.all_x and g_box is None:
         return True, "the expert rate holds for all x; L_Delta on the tube of radius R"
-    assert inv is not None  # _expert_scope accepts a box rate only with a proved invariant set
+    if inv is None or not inv.proved:
+        return False, (
+            "g depends on the state and sup ||g|| is taken over the box "
+            f"{[[float(a), float(b)] for a, b in np.asarray(g_box)]}, but no forward-invariant "
+            "set of the expert inside it is proved"
+            + ("" if inv is None else f" ({inv.reason})")
+            + ": the trajectories are not shown to stay where the gains hold; enlarge "
+            "[contraction] region"
+        )
     if not tasil.R < inv.room:
         return False, (
             f"{inv.reason}; it leaves no room inside the region where the rate is proved "
@@ -1081,6 +1108,34 @@ def _tasil_scope(r: Any, inv: InvariantSet | None, tasil: Any, horizon: float) -
     return True, (
         f"{inv.reason}; the lemma's tube radius R = {tasil.R:.6g} is below that room, so the "
         "learned trajectories stay in the box (first-exit argument)"
+    )
+
+
+G_X_L1_REASON = (
+    "the input operator g depends on the state; L1-DRAC's theory (its adaptation law, filter and "
+    "Theorem 4.1) needs g(t), so rho_L1 is not computed and the certificate covers the "
+    "contraction and TaSIL parts only; docs/recipes.md shows input transformations that make g "
+    "depend on t only"
+)
+"""Why the L1-DRAC part is ``not_applicable`` for a state-dependent g."""
+
+
+def _g_box(s: System, opts: ContractionSettings) -> np.ndarray | None:
+    """The box every ``sup ||g||`` of a state-dependent g is taken over: the box where the
+    expert's rate is computed (``[contraction] region``, else the support); ``None`` for g(t)."""
+    if not s.g_depends_on_x:
+        return None
+    return np.array(opts.region if opts.region is not None else s.support, dtype=float)
+
+
+def _g_scope(g_box: np.ndarray, inv: InvariantSet | None) -> tuple[bool, str]:
+    """Is ``sup ||g||`` (and the rank of g) over ``g_box`` usable for the trajectories?"""
+    box = [[float(a), float(b)] for a, b in g_box]
+    if inv is not None and inv.proved:
+        return True, f"g depends on the state: its bounds hold on {box}; {inv.reason}"
+    return False, (
+        f"g depends on the state: its bounds hold on {box} only, and no forward-invariant set "
+        "of the expert inside it is proved" + ("" if inv is None else f" ({inv.reason})")
     )
 
 

@@ -168,6 +168,14 @@ class L1DRACController:
                 "[policy] learned to the spec",
                 field="policy.learned",
             )
+        if model.g_state:
+            raise SpecError(
+                "the input operator g depends on the state; L1-DRAC needs g(t) (its adaptation "
+                "law and filter assume a state-independent input matrix): deploy the learned "
+                "policy alone, or rewrite the inputs so that g depends on t only "
+                "(docs/recipes.md)",
+                field="dynamics.g",
+            )
         self.model = model
         self.params = params
         self.n, self.m = model.n, model.m
@@ -313,7 +321,7 @@ def _make_step(model: SimModel, params: L1Params) -> Callable:
     def step(state, x):
         # the engine's time: t_j = j dt with j the uint32 step counter
         t = state.step.astype(jnp.uint32).astype(jnp.float64) * dt
-        g_t = model.g(t)
+        g_t = model.g(t, jnp.zeros(model.n))  # g(t): the constructor refuses g(t, x)
         pi = learned_b(x)
         fk = f_b(t, x) + pi @ g_t.T  # f(t, x) + g(t) pi_IL(x), as the engine's known_drift
         u_l1, state = l1_b(state, x, fk, g_t, model.theta_ad(t))

@@ -35,11 +35,11 @@ def tasil_settings(table: Mapping[str, Any] | None) -> TasilSettings:
 
 
 def nominal_field(s: System):
-    """``(t, x, u) -> f(t, x) + g(t) u``, the nominal drift of DRIP (NominalVectorFields)."""
+    """``(t, x, u) -> f(t, x) + g(t, x) u``, the nominal drift of DRIP (NominalVectorFields)."""
     num = s.numeric
 
     def field(t, x, u):
-        return num.f(t, x) + num.g(t) @ u
+        return num.f(t, x) + num.g(t, x) @ u
 
     return field
 

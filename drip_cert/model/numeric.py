@@ -15,6 +15,7 @@ per system); :func:`make_model` builds one from plain jax functions. Nothing her
 
 from __future__ import annotations
 
+import inspect
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -37,7 +38,8 @@ class SimModel:
     f
         ``f(t, x) -> (n,)``: known drift WITHOUT the policy (DRIP Definition "Vector Fields").
     g
-        ``g(t) -> (n, m)``: input operator (time only, L1-DRAC Definition 1).
+        ``g(t, x) -> (n, m)``: input operator. L1-DRAC (Definition 1) needs it to depend on ``t``
+        only; DRIP's other parts allow the state (``g_state``).
     p
         ``p(t, x) -> (n, d)``: known diffusion (may be identically zero).
     lam_mu
@@ -52,6 +54,10 @@ class SimModel:
         ``Theta_ad(t) -> (m, n)``, ``[I_m 0] gbar(t)^{-1}`` of L1-DRAC Assumption 1.
     name
         Free text; part of the resume hash of a Monte-Carlo run.
+    g_state
+        Whether ``g`` depends on the state. ``False`` (the default) lets the engine evaluate
+        ``g(t, x)`` once per step for all paths, at ``x = 0``; ``True`` evaluates it per path.
+        The L1-DRAC controller needs ``False``.
     jac_expert, jac_learned
         ``(t, x) -> (n, n)``: ``nabla_x fbar(t, x, pi(x))`` of the expert and of the learned closed
         loop (DRIP Assumption 2). ``None`` (the default) takes them by forward-mode autodiff
@@ -74,6 +80,7 @@ class SimModel:
     learned: Callable | None
     theta_ad: Callable
     name: str = "model"
+    g_state: bool = False
     jac_expert: Callable | None = None
     jac_learned: Callable | None = None
 
@@ -117,7 +124,7 @@ class SimModel:
         x = jax.ShapeDtypeStruct((n,), jnp.float64)
         expected = {
             "f": ((t, x), (n,)),
-            "g": ((t,), (n, m)),
+            "g": ((t, x), (n, m)),
             "p": ((t, x), (n, d)),
             "lam_mu": ((t, x), (n,)),
             "lam_sigma": ((t, x), (n, d)),
@@ -146,29 +153,31 @@ class SimModel:
 
 
 def closed_loop_jacobian(f: Callable, g: Callable, policy: Callable) -> Callable:
-    """``(t, x) -> nabla_x fbar(t, x, pi(x))``, ``fbar = f(t, x) + g(t) pi(x)`` (DRIP Assumption 2).
+    """``(t, x) -> nabla_x fbar(t, x, pi(x))``, ``fbar = f(t, x) + g(t, x) pi(x)`` (DRIP
+    Assumption 2).
 
-    Forward-mode autodiff of the closed loop; :attr:`~drip_cert.model.system.System.numeric`
-    passes the exact symbolic Jacobian instead.
+    Forward-mode autodiff of the closed loop (through ``g`` too, when it depends on the state);
+    :attr:`~drip_cert.model.system.System.numeric` passes the exact symbolic Jacobian instead.
     """
 
     def jac(t, x):
-        return jax.jacfwd(lambda z: f(t, z) + g(t) @ policy(z))(x)
+        return jax.jacfwd(lambda z: f(t, z) + g(t, z) @ policy(z))(x)
 
     return jac
 
 
-def theta_ad_from_g(g: Callable) -> Callable:
+def theta_ad_from_g(g: Callable, n: int) -> Callable:
     """``Theta_ad(t) = [I_m 0] gbar(t)^{-1} = (g^T g)^{-1} g^T`` (L1-DRAC Assumption 1).
 
     For any ``g_perp`` with ``Im g_perp = ker g^T`` the first ``m`` rows ``L`` of
     ``gbar^{-1} = [g g_perp]^{-1}`` satisfy ``L g = I_m`` and ``L g_perp = 0``, which the
     left pseudo-inverse ``(g^T g)^{-1} g^T`` does; so ``Theta_ad`` does not depend on the choice of
-    ``g_perp`` and equals the pseudo-inverse of ``g``.
+    ``g_perp`` and equals the pseudo-inverse of ``g``. ``g(t, x)`` is read at ``x = 0`` (L1-DRAC
+    needs a ``g`` of ``t`` only).
     """
 
     def theta_ad(t):
-        gt = g(t)
+        gt = g(t, jnp.zeros(n))
         return jnp.linalg.solve(gt.T @ gt, gt.T)
 
     return theta_ad
@@ -187,11 +196,14 @@ def make_model(
     lam_sigma: Callable | None = None,
     theta_ad: Callable | None = None,
     name: str = "model",
+    g_state: bool = False,
 ) -> SimModel:
     """Build a :class:`SimModel` from plain jax functions, filling the optional ones.
 
     ``p``, ``lam_mu`` and ``lam_sigma`` default to zero; ``theta_ad`` defaults to
-    :func:`theta_ad_from_g`. ``g`` may also be a constant ``(n, m)`` array.
+    :func:`theta_ad_from_g`. ``g`` is a callable ``g(t, x)``, a callable of one argument
+    ``g(t)`` (the form before state-dependent input operators; wrapped) or a constant ``(n, m)``
+    array; ``g_state`` says whether the callable depends on ``x``.
 
     Returns
     -------
@@ -204,8 +216,14 @@ def make_model(
             raise SpecError(f"constant g has shape {g_arr.shape}, expected {(n, m)}", field="g")
         g_const = jnp.asarray(g_arr)
 
-        def g(t):
+        def g(t, x):
             return g_const
+
+    elif _positional_arity(g) == 1:
+        g_of_t = g
+
+        def g(t, x):
+            return g_of_t(t)
 
     def _zero_drift(t, x):
         return jnp.zeros((n,), dtype=jnp.float64)
@@ -224,6 +242,22 @@ def make_model(
         lam_sigma=lam_sigma if lam_sigma is not None else _zero_diffusion,
         expert=expert,
         learned=learned,
-        theta_ad=theta_ad if theta_ad is not None else theta_ad_from_g(g),
+        theta_ad=theta_ad if theta_ad is not None else theta_ad_from_g(g, n),
         name=name,
+        g_state=g_state,
+    )
+
+
+def _positional_arity(fn: Callable) -> int | None:
+    """The number of positional parameters of ``fn`` (``None`` when unknown or variadic)."""
+    try:
+        params = inspect.signature(fn).parameters.values()
+    except (TypeError, ValueError):
+        return None
+    kinds = [p.kind for p in params]
+    if inspect.Parameter.VAR_POSITIONAL in kinds:
+        return None
+    return sum(
+        k in (inspect.Parameter.POSITIONAL_ONLY, inspect.Parameter.POSITIONAL_OR_KEYWORD)
+        for k in kinds
     )

@@ -1,13 +1,14 @@
 """The :class:`System`: everything the DRIP guarantee is about, as sympy expressions.
 
 Notation of the DRIP paper (drip_paper.tex, Definitions "Vector Fields" and "Systems"):
-known drift ``f(t, x)`` (without any policy), input operator ``g(t)`` (n x m, time only),
+known drift ``f(t, x)`` (without any policy), input operator ``g(t, x)`` (n x m; the L1-DRAC
+layer needs it to depend on ``t`` only, docs/math/contraction.md section 6),
 expert ``pi*(x)``, learned ``pi_IL(x)``, known diffusion ``p(t, x)`` (n x d), unknown
 uncertainties ``Lambda_mu(t, x)`` (n) and ``Lambda_sigma(t, x)`` (n x d) or only their growth
 bounds ``Delta_mu``, ``Delta_sigma`` (DRIP Assumption 1 / L1-DRAC Assumption 4), the support box
 of the initial law ``D`` (and optionally of ``D_bar``), and the horizon ``T``.
 
-The nominal closed loop is ``fbar(t, x, pi(x)) = f(t, x) + g(t) pi(x)``; the true system adds
+The nominal closed loop is ``fbar(t, x, pi(x)) = f(t, x) + g(t, x) pi(x)``; the true system adds
 ``Lambda_mu`` to the drift and has diffusion ``p + Lambda_sigma``.
 """
 
@@ -26,12 +27,14 @@ import sympy as sp
 from drip_cert.errors import SpecError
 from drip_cert.model.blocks import Block, block_applications
 from drip_cert.model.lower import lower
+from drip_cert.model.statespace import statespace_system
 from drip_cert.numerics.rounding import mul_up, sqrt_up, sum_sq_up
 
 if TYPE_CHECKING:
     from drip_cert.model.numeric import SimModel
 
 RANK_TOL = 1e-10  #: relative singular-value threshold for the full-column-rank check of g
+RANK_CHECK_CORNERS = 64  #: support corners at which a state-dependent g's rank is checked at load
 
 
 def _matrix(value: Any, rows: int, cols: int, what: str) -> sp.ImmutableMatrix:
@@ -59,7 +62,9 @@ class System:
     f
         Known drift, n expressions in ``t`` and the states; must not contain the policy.
     g
-        Input operator, n x m expressions in ``t`` only.
+        Input operator, n x m expressions in ``t`` and the states. A ``g`` that depends on the
+        state keeps DRIP's contraction, delta-ISS and TaSIL parts (every ``sup ||g||`` is then
+        taken over a box the trajectories are proved to stay in); L1-DRAC needs ``g(t)``.
     expert
         Expert policy ``pi*``, m expressions in the states.
     support
@@ -163,7 +168,7 @@ class System:
             object.__setattr__(self, attr, val)
         allowed_x = set(states) | {self.t}
         self._check_symbols(f, allowed_x, "dynamics.f")
-        self._check_symbols(g, {self.t}, "dynamics.g (g may depend on t only)")
+        self._check_symbols(g, allowed_x, "dynamics.g")
         self._check_symbols(expert, set(states), "policy.expert")
         if learned is not None:
             self._check_symbols(learned, set(states), "policy.learned")
@@ -210,19 +215,26 @@ class System:
                 f"g is {n} x {m}: more inputs than states cannot have full column rank",
                 field="dynamics.g",
             )
+        points = self.rank_check_points()
         for tt in self.rank_check_times():
-            G = self.g_at(tt)
-            if not np.all(np.isfinite(G)):
-                raise SpecError(f"g({tt:g}) is not finite", field="dynamics.g")
-            s = np.linalg.svd(G, compute_uv=False)
-            rank = int(np.sum(s > RANK_TOL * max(1.0, s[0])))
-            if rank < m:
-                raise SpecError(
-                    f"g({tt:g}) has rank {rank} < m = {m} columns (singular values "
-                    f"{np.array2string(s, precision=3)}); DRIP Assumption 1 needs full column "
-                    "rank: remove dependent inputs",
-                    field="dynamics.g",
-                )
+            for x in points:
+                self._check_rank_at(tt, x)
+
+    def _check_rank_at(self, tt: float, x: np.ndarray | None) -> None:
+        m = self.m
+        G = self.g_at(tt, x)
+        where = f"{tt:g}" if x is None else f"{tt:g}, x = {np.array2string(x, precision=4)}"
+        if not np.all(np.isfinite(G)):
+            raise SpecError(f"g({where}) is not finite", field="dynamics.g")
+        s = np.linalg.svd(G, compute_uv=False)
+        rank = int(np.sum(s > RANK_TOL * max(1.0, s[0])))
+        if rank < m:
+            raise SpecError(
+                f"g({where}) has rank {rank} < m = {m} columns (singular values "
+                f"{np.array2string(s, precision=3)}); DRIP Assumption 1 needs full column "
+                "rank: remove dependent inputs",
+                field="dynamics.g",
+            )
 
     # ------------------------------------------------------------------ sizes
     @property
@@ -242,11 +254,30 @@ class System:
     def g_is_constant(self) -> bool:
         return not any(e.free_symbols for e in self.g)
 
+    @property
+    def g_depends_on_x(self) -> bool:
+        """Whether the input operator depends on the state (``g(t, x)``, not ``g(t)``)."""
+        states = set(self.states)
+        return any(e.free_symbols & states for e in self.g)
+
     def rank_check_times(self) -> np.ndarray:
         """Times at which time-varying quantities of g are checked (all of them if constant)."""
-        if self.g_is_constant:
+        if not any(self.t in e.free_symbols for e in self.g):
             return np.array([0.0])
         return np.linspace(0.0, self.horizon, 65)
+
+    def rank_check_points(self) -> list[np.ndarray | None]:
+        """States at which a state-dependent g is checked at load: the support's centre and
+        corners (at most :data:`RANK_CHECK_CORNERS` of them); ``[None]`` for ``g(t)``. A quick
+        sanity check only: the certificate bounds ``sigma_min(g)`` from below on a box
+        (analysis/constants.py)."""
+        if not self.g_depends_on_x:
+            return [None]
+        box = np.asarray(self.support, dtype=float)
+        pts = [box.mean(axis=1)]
+        for k in range(min(RANK_CHECK_CORNERS, 2**self.n)):
+            pts.append(np.array([box[i, (k >> i) & 1] for i in range(self.n)]))
+        return pts
 
     # ------------------------------------------------------------------ symbolic closed loops
     def policy(self, which: str = "expert") -> sp.ImmutableMatrix:
@@ -262,11 +293,15 @@ class System:
         raise ValueError(f"policy must be 'expert' or 'learned', got {which!r}")
 
     def closed_loop(self, which: str = "expert") -> sp.ImmutableMatrix:
-        """``fbar(t, x, pi(x)) = f(t, x) + g(t) pi(x)`` (DRIP eq. NominalVectorFields)."""
+        """``fbar(t, x, pi(x)) = f(t, x) + g(t, x) pi(x)`` (DRIP eq. NominalVectorFields)."""
         return sp.ImmutableMatrix(self.f + self.g * self.policy(which))
 
     def closed_loop_jacobian(self, which: str = "expert") -> sp.ImmutableMatrix:
-        """``nabla_x fbar(t, x, pi(x))``, the matrix of DRIP Assumption 2."""
+        """``nabla_x fbar(t, x, pi(x))``, the matrix of DRIP Assumption 2.
+
+        The exact symbolic Jacobian of the closed loop, so for a state-dependent ``g`` it holds
+        ``nabla_x [g(t, x) pi(x)] = g nabla pi + sum_j pi_j nabla_x g_{:, j}`` (product rule).
+        """
         return sp.ImmutableMatrix(self.closed_loop(which).jacobian(self.states))
 
     @property
@@ -274,9 +309,15 @@ class System:
         return bool(self.blocks)
 
     # ------------------------------------------------------------------ numerics
-    def g_at(self, tt: float) -> np.ndarray:
-        """``g(t)`` as a float array (exact evaluation of the sympy matrix)."""
-        return np.array(self.g.subs(self.t, tt).evalf(), dtype=float)
+    def g_at(self, tt: float, x: Sequence[float] | np.ndarray | None = None) -> np.ndarray:
+        """``g(t, x)`` as a float array (sympy evaluation; ``x`` is needed when g depends on
+        the state)."""
+        subs: dict[sp.Symbol, Any] = {self.t: tt}
+        if x is not None:
+            subs.update(zip(self.states, (float(v) for v in x), strict=True))
+        elif self.g_depends_on_x:
+            raise ValueError("g depends on the state: give x")
+        return np.array(self.g.subs(subs).evalf(), dtype=float)
 
     def lower(self, exprs: sp.MatrixBase):
         """jax function ``(t, x) -> array`` for expressions of this system (see :func:`lower`)."""
@@ -290,6 +331,11 @@ class System:
         ``g^T v = g^T g a``, so the first m rows of ``gbar^{-1}`` are the pseudo-inverse of ``g``
         whatever basis ``g_perp`` is chosen (docs/math/l1drac.md).
         """
+        if self.g_depends_on_x:
+            raise SpecError(
+                "Theta_ad is L1-DRAC's and needs g(t); this g depends on the state",
+                field="dynamics.g",
+            )
         g = sp.Matrix(self.g)
         gtg = g.T * g
         inv = gtg.inv() if self.g_is_constant else sp.simplify(gtg.inv())
@@ -319,19 +365,25 @@ class System:
         engine share.
         """
         from drip_cert._jax import jnp  # jax: keep off the CLI start-up path
-        from drip_cert.model.numeric import SimModel  # jax: keep off the CLI start-up path
+        from drip_cert.model.numeric import (  # jax: keep off the CLI start-up path
+            SimModel,
+            theta_ad_from_g,
+        )
 
         n, d = self.n, self.d
         g_fn = self.lower(self.g)
         exp_fn = self.lower(list(self.expert))
-        th = self.lower(self.theta_ad)
+        # Theta_ad is L1-DRAC's (needs g(t)): for g(t, x) the numeric pseudo-inverse at x = 0
+        # only fills the view (never used: the engine and the controller refuse L1 for g(x))
+        th = None if self.g_depends_on_x else self.lower(self.theta_ad)
         learned = None if self.learned is None else self.lower(list(self.learned))
         return SimModel(
             n=n,
             m=self.m,
             d=d,
             f=self.lower(list(self.f)),
-            g=lambda t: g_fn(t, jnp.zeros(n)),
+            g=g_fn,
+            g_state=self.g_depends_on_x,
             p=self.lower(self.diffusion),
             lam_mu=(
                 self.lower(list(self.lambda_mu))
@@ -345,7 +397,7 @@ class System:
             ),
             expert=lambda x: exp_fn(0.0, x),
             learned=None if learned is None else (lambda x: learned(0.0, x)),
-            theta_ad=lambda t: th(t, jnp.zeros(n)),
+            theta_ad=(theta_ad_from_g(g_fn, n) if th is None else (lambda t: th(t, jnp.zeros(n)))),
             name=self.name,
             jac_expert=self.lower(self.closed_loop_jacobian("expert")),
             jac_learned=(
@@ -360,8 +412,9 @@ class System:
         ``Theta`` is any invertible constant ``n x n`` matrix; its entries are taken as the exact
         rationals they denote (a float is the binary rational it stores), and ``Theta^{-1}`` is
         computed exactly, so the new system is exactly equivalent to this one, not an
-        approximation. ``f_z(t, z) = Theta f(t, Theta^{-1} z)``, ``g_z = Theta g``, policies
-        ``pi(Theta^{-1} z)``, uncertainties and the known diffusion ``Theta (.)(t, Theta^{-1} z)``;
+        approximation. ``f_z(t, z) = Theta f(t, Theta^{-1} z)``,
+        ``g_z(t, z) = Theta g(t, Theta^{-1} z)``, policies ``pi(Theta^{-1} z)``, uncertainties and
+        the known diffusion ``Theta (.)(t, Theta^{-1} z)``;
         blocks are composed with ``Theta^{-1}`` (their arguments become linear combinations of
         ``z``), not re-fitted. The support box maps to a parallelotope: the new support is the
         smallest box enclosing it, rounded outward (a larger set: every bound over the support
@@ -410,7 +463,7 @@ class System:
             name=f"{self.name} in z = Theta x",
             states=zs,
             f=lift(self.f),
-            g=sp.ImmutableMatrix(Th * sp.Matrix(self.g)),
+            g=lift(self.g),
             expert=sub(self.expert),
             support=box_image(Th, self.support),
             horizon=self.horizon,
@@ -425,6 +478,66 @@ class System:
             brownian_dim=self.d,
             true_support=None if self.true_support is None else box_image(Th, self.true_support),
             blocks=self.blocks,
+        )
+
+    @classmethod
+    def from_statespace(
+        cls,
+        sys_or_AB: Any,
+        *,
+        expert: Any,
+        support: Sequence[Sequence[float]],
+        horizon: float,
+        states: Sequence[str] | None = None,
+        inputs: Sequence[str] | None = None,
+        name: str = "statespace",
+        learned: Any = None,
+        **uncertainty: Any,
+    ) -> System:
+        """A linear system ``dx/dt = A x + B u`` from a state-space object or ``(A, B)`` arrays.
+
+        Parameters
+        ----------
+        sys_or_AB
+            Anything with attributes ``.A`` and ``.B`` (``control.ss(...)``,
+            ``scipy.signal.StateSpace``; continuous time: a ``.dt`` other than ``None``/``0``
+            is refused), or a pair ``(A, B)`` of arrays. Read by duck typing: python-control
+            is never imported. Every entry is taken as the exact rational of its double
+            (:func:`~drip_cert.model.literals.exact_number`), as the TOML route
+            (``[dynamics] A, B``, :mod:`drip_cert.spec.linear`) takes its decimals.
+        expert, learned
+            A gain matrix ``K`` (``m x n`` numbers: the policy ``u = -K x``, the sign of
+            ``control.lqr`` and ``scipy``), a list of ``m`` expressions (sympy, or text in the
+            state names), or (``learned`` only) an :class:`~drip_cert.model.mlp.MLP` (a block
+            named ``pi_il``).
+        support, horizon
+            The initial law's support box and ``T``, as for :class:`System`.
+        states, inputs
+            Names; default: the object's ``state_labels`` / ``input_labels`` when it has them
+            (python-control >= 0.10), else ``x1..xn`` / ``u1..um``.
+        name
+            Label for reports.
+        **uncertainty
+            ``lambda_mu``, ``lambda_sigma``, ``diffusion`` (expressions or text),
+            ``Delta_mu``, ``Delta_sigma``, ``brownian_dim``, ``true_support``: as for
+            :class:`System`.
+
+        Returns
+        -------
+        System
+            ``f = A x``, ``g = B``, the expert (and learned) policies.
+        """
+        return statespace_system(
+            cls,
+            sys_or_AB,
+            expert=expert,
+            support=support,
+            horizon=horizon,
+            states=states,
+            inputs=inputs,
+            name=name,
+            learned=learned,
+            **uncertainty,
         )
 
     def with_learned(

@@ -159,6 +159,12 @@ def simulate(
     if not isinstance(config, SimConfig):
         raise SpecError("config must be a SimConfig")
     cfg = config
+    if model.g_state and "learned_l1_true" in cfg.scenarios:
+        raise SpecError(
+            "scenario 'learned_l1_true' needs an input operator of t only (L1-DRAC), and this "
+            "model's g depends on the state: drop the scenario",
+            field="SimConfig.scenarios",
+        )
     rec_bytes = cfg.n_records * len(cfg.scenarios) * cfg.chunk_size * model.n * 8
     if rec_bytes > _MAX_CHUNK_BYTES:
         raise SpecError(

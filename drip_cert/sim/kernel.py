@@ -394,7 +394,7 @@ def _fields(model: SimModel, config: SimConfig) -> _Fields:
     x = jnp.zeros((model.n,), jnp.float64)
     return _Fields(
         f=in_dtype(model.f, (t, x), lo),
-        g=in_dtype(model.g, (t,), lo),
+        g=in_dtype(model.g, (t, x), lo),
         p=in_dtype(model.p, (t, x), lo),
         lam_mu=in_dtype(model.lam_mu, (t, x), lo),
         lam_sigma=in_dtype(model.lam_sigma, (t, x), lo),
@@ -436,14 +436,20 @@ def _advance_impl(key, carry, r0, *, model, config, records_per_call):
         else None
     )
 
+    g_b = jax.vmap(model.g, in_axes=(None, 0))
+
     def known_drift(t, x, g_t, policy_b):
-        # f(t,x) + g(t) pi(x), batched: (B, n)
+        # f(t,x) + g(t, x) pi(x), batched: (B, n); g_t is g(t) shared by every path, or None
+        # when g depends on the state (then evaluated per path)
+        if g_t is None:
+            return f_b(t, x) + jnp.einsum("bnm,bm->bn", g_b(t, x), policy_b(x))
         return f_b(t, x) + policy_b(x) @ g_t.T
 
     def step(carry, j):
         xs, codes, l1s, idx, buf = carry
         t = (j.astype(jnp.float64) * dt).astype(ftype)
-        g_t = model.g(t)
+        # g(t) shared by every path, or None when g depends on the state (then per path)
+        g_t = None if sim_model.g_state else model.g(t, jnp.zeros(sim_model.n, ftype))
         new_xs, new_codes = [], []
         dw = None
         if has_noise:

@@ -125,7 +125,7 @@ def _fingerprint(model: SimModel, x0_sampler, x0_bar_sampler) -> str:
     vals = []
     for t, x in zip(ts, xs):
         t = jnp.float64(t)
-        vals += [model.f(t, x), model.g(t), model.p(t, x), model.lam_mu(t, x)]
+        vals += [model.f(t, x), model.g(t, x), model.p(t, x), model.lam_mu(t, x)]
         vals += [model.lam_sigma(t, x), model.expert(x), model.theta_ad(t)]
         if model.learned is not None:
             vals.append(model.learned(x))

@@ -181,7 +181,9 @@ def linearise(
     t: sp.Symbol,
     path: str | None,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """``(A, B) = (df/dx(0), g)`` as floats, for an LQR design on a nonlinear model.
+    """``(A, B) = (df/dx(0), g(0))`` as floats, for an LQR design on a nonlinear model (a
+    state-dependent ``g`` is read at ``x = 0``: at ``(x, u) = (0, 0)`` the input term's state
+    derivative ``d/dx [g(x) u]`` vanishes).
 
     The design needs a time-invariant linearisation at an equilibrium: ``f(0) = 0``, ``df/dx(0)``
     and ``g`` free of ``t``, and no blocks in ``f`` (their derivatives are not evaluated here).
@@ -203,6 +205,7 @@ def linearise(
     at0 = {s: 0 for s in states}
     f0 = fm.subs(at0)
     J = fm.jacobian(list(states)).subs(at0)
+    gm = gm.subs(at0)
     if t in set().union(*(e.free_symbols for e in [*f0, *J, *gm])):
         raise SpecError(
             f'expert = "lqr" needs a time-invariant linearisation at x = 0, but f(0), df/dx(0) '

@@ -302,7 +302,7 @@ def spec_from_dict(doc: Mapping[str, Any], path: Path | None = None) -> Spec:
             raise err(f"must have {length} entries (one per state/input), got {len(val)}", fld)
         return [parse(v, f"{fld}[{i}]", allow_t) for i, v in enumerate(val)]
 
-    def matrix(val: Any, fld: str, rows: int, only_t: bool = False) -> list[list[sp.Expr]]:
+    def matrix(val: Any, fld: str, rows: int) -> list[list[sp.Expr]]:
         if not isinstance(val, list) or len(val) != rows:
             raise err(f"must be a list of {rows} rows", fld)
         out = []
@@ -316,13 +316,7 @@ def spec_from_dict(doc: Mapping[str, Any], path: Path | None = None) -> Spec:
                 raise err(f"row {i} has {len(row)} entries, row 0 has {width}", f"{fld}[{i}]")
             prow = []
             for j, v in enumerate(row):
-                e = parse(v, f"{fld}[{i}][{j}]")
-                if only_t and (e.free_symbols - {t}):
-                    raise err(
-                        f"{v!r} depends on the state; g may depend on {tname} only",
-                        f"{fld}[{i}][{j}]",
-                    )
-                prow.append(e)
+                prow.append(parse(v, f"{fld}[{i}][{j}]"))
             out.append(prow)
         return out
 
@@ -333,7 +327,7 @@ def spec_from_dict(doc: Mapping[str, Any], path: Path | None = None) -> Spec:
         linear_model = (A_lin, B_lin)
     else:
         f = vector(dyn["f"], "dynamics.f", n)
-        g = matrix(dyn["g"], "dynamics.g", n, only_t=True)
+        g = matrix(dyn["g"], "dynamics.g", n)
     m = len(g[0])
     diffusion = matrix(dyn["diffusion"], "dynamics.diffusion", n) if "diffusion" in dyn else None
     pol = doc["policy"]

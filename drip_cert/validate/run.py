@@ -240,7 +240,7 @@ def validate(
         dt = min(sim.dt, ts)
         dt = ts / max(1, round(ts / dt))
         params = L1Params(sim.omega, sim.lambda_s, ts, dt)
-        if design is None:
+        if design is None and not s.g_depends_on_x:
             notes.append(
                 "no feasible L1-DRAC design is certified: the L1 run uses practical "
                 "parameters and no uncertainty bound is checked"
@@ -255,6 +255,17 @@ def validate(
         kappa = coords.gap_in_x(kappa)  # P(||x gap|| >= F kappa) <= P(||z gap|| >= kappa)
     delta_l1 = design.delta if design is not None else None
     why = "no feasible L1-DRAC design" if design is None else "practical T_s, see the notes"
+    with_l1 = not s.g_depends_on_x
+    if not with_l1:
+        why = (
+            "L1-DRAC is not applicable: g depends on the state (L1-DRAC needs g(t)); the true "
+            "process is simulated without it"
+        )
+        notes.append(
+            "g depends on the state: no L1-DRAC process is simulated; the L1-DRAC checks are "
+            "not_checked and the uncertainty gaps shown are those of the true process without "
+            "L1-DRAC (for information)"
+        )
     kappas = _thresholds(kappa, rho_tasil)
     record_every = max(1, int(round(T / dt)) // 200)
     while int(round(T / dt)) % record_every:
@@ -298,8 +309,9 @@ def validate(
         p=p,
         kappa=kappa,
         delta_l1=delta_l1,
-        at_certified_l1=at_cert,
+        at_certified_l1=at_cert and with_l1,
         not_certified_why=why,
+        with_l1=with_l1,
     )
     if T < s.horizon:
         cause = (
@@ -355,9 +367,11 @@ def validate(
     for key, gap in (
         ("tig_max", "total_l1"),
         ("policy_ig_max", "policy"),
-        ("uncertainty_ig_max", uncertainty_gap_name(res)),
+        ("uncertainty_ig_max", uncertainty_gap_name(res, with_l1)),
         ("tig_max_without_l1", "total_true"),
     ):
+        if not with_l1 and gap == "total_l1":
+            continue  # no L1-DRAC process for g(t, x): absent, the notes say why
         g = res.gap(gap)
         emp[key] = {
             "value": g.max_mean,

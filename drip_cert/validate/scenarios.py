@@ -47,7 +47,10 @@ def has_known_diffusion(s: System) -> bool:
 
 def scenarios_for(s: System, base: tuple[str, ...]) -> tuple[str, ...]:
     """``base`` plus L1-DRAC's nominal SDE (4b) (``nominal_sde``) when ``s`` has a known
-    diffusion: the uncertainty gaps are then measured against it, like with like."""
+    diffusion: the uncertainty gaps are then measured against it, like with like. Without the
+    L1-DRAC process when ``g`` depends on the state (L1-DRAC needs ``g(t)``)."""
+    if s.g_depends_on_x:
+        base = tuple(b for b in base if b != "learned_l1_true")
     return (*base, "nominal_sde") if has_known_diffusion(s) else tuple(base)
 
 
@@ -92,7 +95,7 @@ def run_scenarios(
         n_paths=paths,
         seed=seed,
         chunk_size=min(chunk_size, paths),
-        l1=l1_params,
+        l1=None if s.g_depends_on_x else l1_params,
         record_every=record_every,
         kappas=kappas,
         p_max=p_max,

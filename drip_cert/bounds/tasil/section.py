@@ -64,7 +64,8 @@ def trajectory_h(
     jac = jax.jit(jax.vmap(jax.jacfwd(error)))
     field = nominal_field(s)
     speed_fn = jax.jit(jax.vmap(lambda z: jnp.linalg.norm(field(0.0, z, num.expert(z)))))
-    autonomous = not any(s.t in e.free_symbols for e in s.f) and s.g_is_constant
+    # the expert's speed decays along a contracting AUTONOMOUS closed loop: no t in f nor in g
+    autonomous = not any(s.t in e.free_symbols for e in (*s.f, *s.g))
     sound = speed_sound and autonomous
     hs: list[TrajectoryH] = []
     for traj in demos.states:
