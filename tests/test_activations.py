@@ -243,3 +243,25 @@ def test_mlp_per_layer_activations_and_both_constructors():
     assert old.activation_specs == ("gelu", "gelu", "tanh") and old.smooth
     with pytest.raises(SpecError, match="one per layer"):
         MLP(m.weights, m.biases, activations=("relu", "relu"))
+
+
+AUTODIFF_ROUNDING = 1e-12
+"""The float64 rounding of an autodiff Jacobian of a 2-8-8-1 network with O(1) weights (~1e-15)
+with room: the enclosure is rigorous, the sampled Jacobian is not."""
+
+
+@pytest.mark.parametrize("activation", ["relu", "leaky_relu(0.1)", "tanh"])
+def test_centred_jacobian_enclosure_contains_sampled_jacobians(activation):
+    """The centred Jacobian enclosure over boxes (used by the sup of ||pi_IL - pi*||): for a
+    smooth network the mean-value form, for a relu one the plain Clarke enclosure (no Hessian
+    through a kink; this asserted a Hessian before). Every autodiff Jacobian at points of the box
+    (almost everywhere differentiable) lies inside."""
+    from drip_cert.analysis.mlp import enclose_jacobian_centred
+
+    rng = np.random.default_rng(3)
+    m = init_mlp((2, 8, 8, 1), rng, activation=activation)
+    lo, hi = np.array([[-0.5, -0.2]]), np.array([[0.1, 0.4]])
+    jlo, jhi = enclose_jacobian_centred(m, lo, hi)
+    X = lo + rng.random((500, 2)) * (hi - lo)
+    J = np.asarray(jax.vmap(jax.jacfwd(lambda x: m.apply_jax(x[None, :])[0]))(jnp.asarray(X)))
+    assert np.all(J >= jlo[0] - AUTODIFF_ROUNDING) and np.all(J <= jhi[0] + AUTODIFF_ROUNDING)

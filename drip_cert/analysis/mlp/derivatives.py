@@ -254,7 +254,8 @@ def _propagate(
 
 def enclose_jacobian_centred(mlp: MLP, lo, hi) -> tuple[np.ndarray, np.ndarray]:
     """Jacobian enclosure over boxes, the plain (centred pre-activation) enclosure intersected
-    with the mean-value form ``J(x) in [J(c)] + [H(box)] (x - c)``.
+    with the mean-value form ``J(x) in [J(c)] + [H(box)] (x - c)`` (smooth networks; for a
+    nonsmooth one the plain enclosure of its Clarke Jacobian alone).
 
     ``lo``, ``hi``: ``(..., in)``; returns ``(J_lo, J_hi)`` of shape ``(..., out, in)``. Sound by
     the mean value theorem applied to each entry ``J_ji`` on the segment from ``c`` to ``x``.
@@ -266,9 +267,13 @@ def enclose_jacobian_centred(mlp: MLP, lo, hi) -> tuple[np.ndarray, np.ndarray]:
     hi = hi.reshape(-1, d)
     c, r = mid_rad(lo, hi)
     box = enclose_derivatives(mlp, lo, hi, hessian=True)
-    at_c = enclose_derivatives(mlp, c, c, hessian=False, centred=False)
-    assert box.hessian is not None
     out = mlp.out_dim
+    if box.hessian is None:
+        # a nonsmooth network (relu): no second derivative, so no mean-value form; the plain
+        # enclosure (of the Clarke Jacobian) is what is sound
+        jlo, jhi = box.jacobian
+        return jlo.reshape(*batch, out, d), jhi.reshape(*batch, out, d)
+    at_c = enclose_derivatives(mlp, c, c, hessian=False, centred=False)
     hlo, hhi = box.hessian
     clo, chi = at_c.jacobian
     mlo, mhi = mean_value_form(
