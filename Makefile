@@ -4,7 +4,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test test-slow test-all lint proofs bench clean
+.PHONY: demo test test-slow test-all lint proofs bench docs clean
 
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PY) -m venv $(VENV)
@@ -37,6 +37,11 @@ lint: $(STAMP)
 	$(BIN)/ruff format --check .
 	$(BIN)/mypy
 
+# the documentation site (mkdocs-material + mkdocstrings), built strictly: a warning (a broken
+# link, a page missing from the nav, a docstring mkdocstrings cannot read) fails the build
+docs: $(STAMP)
+	NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --strict --site-dir site
+
 proofs: $(STAMP)
 	$(BIN)/python -m proofs_check
 
@@ -44,4 +49,4 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/mc_throughput.py
 
 clean:
-	rm -rf $(VENV) demo_out .pytest_cache
+	rm -rf $(VENV) demo_out .pytest_cache site

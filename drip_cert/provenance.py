@@ -58,6 +58,11 @@ def weakest(*hows: How | str | Quantity | Check | Iterable[Any]) -> How:
 
     Accepts :class:`How` values, their strings, :class:`Quantity` and :class:`Check` objects
     (their ``how``) and iterables of any of these.
+
+    >>> weakest(How.EXACT, "sound", [How.GIVEN])
+    <How.GIVEN: 'given'>
+    >>> weakest()
+    <How.EXACT: 'exact'>
     """
     out = How.EXACT
     for h in _flatten(hows):
@@ -260,6 +265,16 @@ class Quantity:
         """A quantity computed from ``inputs`` by a ``method`` of the given strength.
 
         ``how = weakest(method, *inputs)``, ``scope = narrowest(scope, *inputs)``.
+
+        Examples
+        --------
+        A sound rate times an estimated constant is an estimate, and says what it rests on:
+
+        >>> rate = Quantity("lambda", 0.5, How.SOUND, scope=Scope(((-1.0, 1.0),)))
+        >>> lip = Quantity("L_mu", 0.1, How.ESTIMATE)
+        >>> gain = Quantity.derive("gamma", lip.value / rate.value, inputs=[rate, lip])
+        >>> gain.how, gain.rests_on, gain.scope.describe()
+        (<How.ESTIMATE: 'estimate'>, ('L_mu',), 'box [[-1, 1]], all t')
         """
         ins = list(_flatten(inputs))
         return cls(

@@ -273,8 +273,8 @@ def test_examples_pass_check_spec(capsys, path):
 
 
 def test_readme_settings_tables_are_valid(tmp_path):
-    """The settings tables of the README's spec example load."""
-    text = (ROOT / "README.md").read_text()
+    """The settings tables of the spec example of docs/getting_started.md load."""
+    text = (ROOT / "docs" / "getting_started.md").read_text()
     block = text[text.index("[constants]                    # optional") :]
     block = block[: block.index("```")]
     spec = load_spec(write(tmp_path, block))
@@ -311,3 +311,56 @@ def test_settings_module_is_in_the_spec_layer():
     ours = {m for m in mods if m.startswith("drip_cert")}
     numerics = {"drip_cert.numerics.rounding", "drip_cert.numerics.stats"}
     assert ours <= {"drip_cert.errors", "drip_cert.provenance", *numerics}, ours
+
+
+# ------------------------------------------------------------------ each setting declared once
+def test_overrides_are_validated_like_the_spec():
+    """A value set from Python (``dataclasses.replace`` of run_pipeline's overrides, keywords) is
+    checked by the same reader as the TOML value, with the same message."""
+    import dataclasses
+
+    from drip_cert.spec.settings import L1Settings, SimSettings, TasilSettings
+
+    with pytest.raises(SpecError, match=r"steps = -1 is not allowed.*positive integer"):
+        dataclasses.replace(TasilSettings(), steps=-1)
+    with pytest.raises(SpecError, match=r"dt"):
+        SimSettings(dt=0.0)
+    with pytest.raises(SpecError, match=r"p_star = 1 is not allowed.*>= p = 2"):
+        L1Settings(p=2, p_star=1)
+    with pytest.raises(SpecError, match=r"region"):
+        ContractionSettings(region=((1.0, 0.0),))
+    assert dataclasses.replace(TasilSettings(), steps=5).steps == 5  # a valid override passes
+
+
+def test_a_new_setting_is_one_declaration():
+    """A field declared with ``setting(...)`` is a key of its table (with its meaning), is read
+    from TOML with its reader and default, and is checked when set from Python: nothing else to
+    write."""
+    import dataclasses
+
+    from drip_cert.spec.settings import (
+        TableReader,
+        positive_int,
+        read_declared,
+        setting,
+        table_keys,
+        validate_declared,
+    )
+
+    @dataclasses.dataclass(frozen=True)
+    class Demo:
+        widgets: int = setting(3, "number of widgets", positive_int)
+
+        def __post_init__(self) -> None:
+            validate_declared(self, "demo")
+
+    keys = table_keys(Demo)
+    assert dict(keys) == {"widgets": "number of widgets"}
+    assert read_declared(Demo, TableReader("demo", {}, keys)) == {"widgets": 3}
+    assert read_declared(Demo, TableReader("demo", {"widgets": 7}, keys)) == {"widgets": 7}
+    with pytest.raises(SpecError, match=r"demo\.widgets.*widgets \(number of widgets\)"):
+        read_declared(Demo, TableReader("demo", {"widgets": 0}, keys))
+    with pytest.raises(SpecError, match=r"Did you mean widgets"):
+        TableReader("demo", {"widget": 1}, keys)
+    with pytest.raises(SpecError, match=r"widgets"):
+        Demo(widgets=-2)

@@ -65,6 +65,11 @@ def exact_decimal(text: str) -> sp.Rational:
     optional point and an optional exponent ``e``/``E`` with a sign. The value is
     ``m / 10^k`` of the digits written (decimal arithmetic, no rounding anywhere).
 
+    >>> exact_decimal("0.1")
+    1/10
+    >>> exact_decimal("6.02_214e23")
+    602214000000000000000000
+
     Raises
     ------
     ValueError
@@ -93,6 +98,11 @@ def exact_number(value: int | float) -> sp.Rational:
     (:func:`exact_decimal`); any other ``float`` is the binary rational the double stores
     (``sp.Rational(0.1) = 3602879701896397/36028797018963968``): the value it denotes, never its
     shortest ``repr`` (a rounding of it).
+
+    >>> exact_number(0.1)
+    3602879701896397/36028797018963968
+    >>> exact_number(DecimalFloat("0.1"))
+    1/10
 
     Raises
     ------

@@ -13,6 +13,7 @@ so that a bad value or an unknown key is found before anything is computed. Ever
 
 from __future__ import annotations
 
+import difflib
 import math
 import os
 import tomllib
@@ -33,21 +34,62 @@ from drip_cert.numerics.user_files import input_file, reading
 from drip_cert.spec.linear import ExpertGain, gain_expert, linear_dynamics, linearise, lqr_expert
 from drip_cert.spec.settings import TABLES, Settings, toml_text
 
-SECTIONS = {
-    "system": {"name", "states", "inputs", "horizon", "time", "brownian_dim"},
-    "dynamics": {"f", "g", "A", "B", "diffusion"},
-    "policy": {"expert", "learned", "lqr", "structure"},
-    "blocks": None,  # table of tables, checked per block
-    "uncertainty": {"drift", "diffusion", "Delta_mu", "Delta_sigma"},
-    "initial": {"support", "true_support"},
-    # the settings tables: checked key by key by drip_cert.spec.settings
-    "constants": None,
-    "contraction": None,
-    "l1drac": None,
-    "tasil": None,
-    "simulation": None,
-}
-BLOCK_KEYS = {"kind", "weights", "inputs", "outputs", "activation"}
+#: Every section of a spec with its keys and their meanings (``None``: a table of tables, or a
+#: settings table whose keys are declared in :mod:`drip_cert.spec.settings`). The one
+#: declaration of these keys: the loader's checks and the spec reference read it.
+SECTIONS: Mapping[str, Mapping[str, str] | None] = MappingProxyType(
+    {
+        "system": {
+            "name": "name of the system (reports, file names)",
+            "states": "names of the state variables, in order",
+            "inputs": "names of the inputs (default u1..um)",
+            "horizon": "horizon T of the guarantee (seconds)",
+            "time": 'name of time in expressions (default "t")',
+            "brownian_dim": "dimension d of the Brownian motion (default: columns of the "
+            "diffusion, else n)",
+        },
+        "dynamics": {
+            "f": "known drift f(t, x), without the policy: one expression per state",
+            "g": "input matrix g(t, x), n x m expressions",
+            "A": "linear model f = A x (numbers, n x n), instead of f",
+            "B": "linear model g = B (numbers, n x m), instead of g",
+            "diffusion": "known diffusion p(t, x), n x d expressions (optional)",
+        },
+        "policy": {
+            "expert": 'the expert pi*: expressions (m), a gain { K = [[...]] } or "lqr"',
+            "learned": "the learned policy pi_IL: expressions (m), usually of a block",
+            "lqr": "[policy.lqr]: Q and R of the LQR expert",
+            "structure": "known part of the residual policy class (m expressions)",
+        },
+        "blocks": None,  # table of tables, checked per block (BLOCK_KEYS)
+        "uncertainty": {
+            "drift": "uncertain drift Lambda_mu(t, x): n expressions",
+            "diffusion": "uncertain diffusion Lambda_sigma(t, x): n x d expressions",
+            "Delta_mu": "a growth bound of the uncertain drift instead of expressions",
+            "Delta_sigma": "a growth bound of the uncertain diffusion instead of expressions",
+        },
+        "initial": {
+            "support": "box supporting the initial law D: [[lo, hi], ...] per state",
+            "true_support": "box supporting the true initial law D_bar (default D)",
+        },
+        # the settings tables: checked key by key by drip_cert.spec.settings
+        "constants": None,
+        "contraction": None,
+        "l1drac": None,
+        "tasil": None,
+        "simulation": None,
+    }
+)
+BLOCK_KEYS: Mapping[str, str] = MappingProxyType(
+    {
+        "kind": 'the kind of block: "mlp" (the default and only kind)',
+        "weights": "the network file: .onnx, .safetensors or .npz, relative to the spec",
+        "inputs": "input dimension (read from an .onnx graph; checked when given)",
+        "outputs": "output dimension (read from an .onnx graph; checked when given)",
+        "activation": 'activation of the hidden layers ("relu", "tanh", ...) or a list with '
+        "one entry per layer, the output layer included",
+    }
+)
 REQUIRED = {
     "system": {"name", "states", "horizon"},
     "dynamics": set(),  # f and g, or A and B: checked by _dynamics_form
@@ -210,11 +252,15 @@ def spec_from_dict(doc: Mapping[str, Any], path: Path | None = None) -> Spec:
             raise err(f"[{sec}] must be a table", sec)
         keys = SECTIONS[sec]
         if keys is not None:
-            extra = set(val) - keys
+            extra = set(val) - set(keys)
             if extra:
+                key = sorted(extra)[0]
+                close = difflib.get_close_matches(key, list(keys), n=2, cutoff=0.6)
+                hint = f" Did you mean {' or '.join(close)}?" if close else ""
                 raise err(
-                    f"unknown key(s) {sorted(extra)} in [{sec}]; allowed: {sorted(keys)}",
-                    f"{sec}.{sorted(extra)[0]}",
+                    f"unknown key(s) {sorted(extra)} in [{sec}].{hint} Allowed keys: "
+                    + ", ".join(keys),
+                    f"{sec}.{key}",
                 )
     for sec, req in REQUIRED.items():
         if sec not in doc:
@@ -244,7 +290,7 @@ def spec_from_dict(doc: Mapping[str, Any], path: Path | None = None) -> Spec:
         fld = f"blocks.{bname}"
         if not isinstance(bdef, dict):
             raise err("must be a table with kind, weights, inputs, outputs", fld)
-        extra = set(bdef) - BLOCK_KEYS
+        extra = set(bdef) - set(BLOCK_KEYS)
         if extra:
             raise err(f"unknown key(s) {sorted(extra)}; allowed: {sorted(BLOCK_KEYS)}", fld)
         if bname in reserved or bname in state_names:

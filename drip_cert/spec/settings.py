@@ -24,7 +24,7 @@ import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from types import MappingProxyType
-from typing import Any, TypedDict
+from typing import Any, ClassVar, TypedDict, cast
 
 import numpy as np
 
@@ -381,9 +381,115 @@ class TableReader:
         )
 
 
-def _defaults(cls: type) -> dict[str, Any]:
-    """The dataclass defaults of a settings class: its ONE set of defaults."""
-    return {f.name: f.default for f in dataclasses.fields(cls) if f.name != "given"}
+# ------------------------------------------------------------------------------ declarations
+def setting(
+    default: Any,
+    description: str,
+    read: Callable[..., Any] | None = None,
+    *args: Any,
+    key: str | None = None,
+    example: Any = None,
+    factory: Callable[[], Any] | None = None,
+    **kw: Any,
+) -> Any:
+    """Declare one key of a settings table, once: its default, its meaning and its reader.
+
+    The dataclass field this returns carries everything else the project needs about the key:
+    the table's allowed keys and their meanings (:func:`table_keys`, for messages and the spec
+    reference of the documentation), how it is read from TOML (:func:`read_declared`:
+    ``read(value, field, *args, **kw)``) and how a value set from Python is checked
+    (:func:`validate_declared`). ``read = None`` marks a key whose reading needs more than its
+    own value (the region needs the state dimension); its class reads and checks it.
+    ``key`` is the TOML key when it differs from the field's name; ``factory`` replaces
+    ``default`` when the default must be computed.
+    """
+    meta = MappingProxyType(
+        {
+            "description": description,
+            "read": read,
+            "args": args,
+            "kw": MappingProxyType(kw),
+            "example": example,
+            "key": key,
+        }
+    )
+    if factory is not None:
+        return field(default_factory=factory, metadata=meta)
+    return field(default=default, metadata=meta)
+
+
+def declared(cls: Any) -> tuple[dataclasses.Field[Any], ...]:
+    """The fields of a settings class that are keys of its table, in declaration order."""
+    return tuple(f for f in dataclasses.fields(cls) if "description" in f.metadata)
+
+
+def _key(f: dataclasses.Field[Any]) -> str:
+    return f.metadata["key"] or f.name
+
+
+def _default(f: dataclasses.Field[Any]) -> Any:
+    if f.default is not dataclasses.MISSING:
+        return f.default
+    return f.default_factory()  # type: ignore[operator]
+
+
+def table_keys(cls: Any) -> Mapping[str, str]:
+    """Every key of a settings table with its meaning, from the declarations."""
+    return MappingProxyType({_key(f): f.metadata["description"] for f in declared(cls)})
+
+
+def read_declared(cls: Any, r: TableReader, names: Sequence[str] | None = None) -> dict[str, Any]:
+    """Read each declared key that has a reader (only ``names`` when given) from the table of
+    ``r``: the value as written, checked, or the declared default when the key is absent."""
+    out: dict[str, Any] = {}
+    for f in declared(cls):
+        read = f.metadata["read"]
+        if read is None or (names is not None and f.name not in names):
+            continue
+        out[f.name] = r.get(
+            _key(f),
+            read,
+            _default(f),
+            *f.metadata["args"],
+            example=f.metadata["example"],
+            **f.metadata["kw"],
+        )
+    return out
+
+
+def _as_toml(value: Any) -> Any:
+    """A value set from Python in the form TOML gives it (lists, Python scalars)."""
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, tuple | list):
+        return [_as_toml(v) for v in value]
+    return value
+
+
+def validate_declared(
+    obj: Any,
+    table: str,
+    names: Sequence[str] | None = None,
+    path: str | None = None,
+    source: Any = None,
+) -> None:
+    """Check every declared value of a constructed settings object with its reader, so that a
+    value set from Python (keywords, ``dataclasses.replace`` of an override) is checked exactly
+    like one read from a spec; ``None`` passes where ``None`` is the default. ``source``: the
+    class whose declarations to use (default ``type(obj)``; ``DesignRequest`` borrows
+    :class:`L1Settings`'). Raises SpecError naming ``table.key``."""
+    for f in declared(source if source is not None else type(obj)):
+        read = f.metadata["read"]
+        if read is None or (names is not None and f.name not in names):
+            continue
+        value = getattr(obj, f.name)
+        default = _default(f)
+        if value is None and default is None:
+            continue
+        where = Field(
+            table, _key(f), path, f.metadata["description"], default, f.metadata["example"]
+        )
+        read(_as_toml(value), where, *f.metadata["args"], **f.metadata["kw"])
 
 
 # ------------------------------------------------------------------------------ [contraction]
@@ -398,28 +504,51 @@ class ContractionSettings:
     a box result is weaker and is reported as such. A region must contain the support.
     """
 
-    method: str = "auto"
-    region: tuple[tuple[float, float], ...] | None = None
-    tol: float = 1e-3
-    max_boxes: int = 4000
+    method: str = setting(
+        "auto", "how the contraction rate is obtained", one_of, CONTRACTION_METHODS
+    )
+    region: tuple[tuple[float, float], ...] | None = setting(
+        None, "box where the rate is proved; default the support of [initial]", example=[[-1, 1]]
+    )
+    tol: float = setting(
+        1e-3,
+        "gap between the upper and lower bound of the interval branch and bound",
+        positive_float,
+    )
+    max_boxes: int = setting(
+        4000, "largest number of boxes of the interval branch and bound", positive_int
+    )
     metric: bool = True  #: search an LMI contraction metric (false only for "euclidean")
-    max_time: float = math.inf  #: optional wall-time guard (seconds); none by default
-    coordinates: str = "auto"  #: "auto", "euclidean", "lmi" or "given" (a P in ``metric``)
-    P: tuple[tuple[float, ...], ...] | None = None  #: the given metric
+    max_time: float = setting(
+        math.inf,
+        "optional wall-time guard of the branch and bound per closed loop (seconds; default "
+        "none): when it fires the rate depends on the machine's speed, and the certificate says "
+        "so; max_boxes is the budget that keeps it reproducible",
+        positive_or_inf,
+    )
+    coordinates: str = setting(
+        "auto",
+        'certify in metric coordinates: "auto", "euclidean", "lmi" or a matrix P',
+        key="metric",
+    )
+    P: tuple[tuple[float, ...], ...] | None = None  #: the given metric (``metric = [[...]]``)
     given: frozenset[str] = field(default=frozenset(), compare=False, repr=False)
 
-    KEYS = MappingProxyType(
-        {
-            "method": "how the contraction rate is obtained",
-            "region": "box where the rate is proved; default the support of [initial]",
-            "tol": "gap between the upper and lower bound of the interval branch and bound",
-            "max_boxes": "largest number of boxes of the interval branch and bound",
-            "metric": 'certify in metric coordinates: "auto", "euclidean", "lmi" or a matrix P',
-            "max_time": "optional wall-time guard of the branch and bound per closed loop "
-            "(seconds; default none): when it fires the rate depends on the machine's speed, "
-            "and the certificate says so; max_boxes is the budget that keeps it reproducible",
-        }
-    )
+    KEYS: ClassVar[Mapping[str, str]]
+
+    def __post_init__(self) -> None:
+        validate_declared(self, "contraction")
+        if self.region is not None:
+            where = Field("contraction", "region", None, self.KEYS["region"])
+            box(_as_toml(self.region), where, len(self.region))
+        if self.coordinates not in (*METRIC_CHOICES, "given") or (
+            (self.P is not None) != (self.coordinates == "given")
+        ):
+            raise SpecError(
+                f"coordinates = {self.coordinates!r} with P = {self.P!r}: coordinates is one of "
+                f"{', '.join(METRIC_CHOICES)} (P None) or 'given' with a matrix P",
+                field="contraction.metric",
+            )
 
     @classmethod
     def from_table(
@@ -432,7 +561,6 @@ class ContractionSettings:
         """Validate ``[contraction]`` (``n``: the state dimension, needed for ``region``;
         ``support``: the support of ``D``, which the region must contain)."""
         r = TableReader("contraction", table, cls.KEYS, path)
-        d = _defaults(cls)
         region = None
         if "region" in r.table:
             if n is None:
@@ -451,12 +579,9 @@ class ContractionSettings:
         choice = r.get("metric", metric_choice, "auto", n)
         coords, P = ("auto", None) if choice == "auto" else choice
         return cls(
-            method=r.get("method", one_of, d["method"], CONTRACTION_METHODS),
+            **read_declared(cls, r),
             region=region,
-            tol=r.get("tol", positive_float, d["tol"]),
-            max_boxes=r.get("max_boxes", positive_int, d["max_boxes"]),
             metric=coords != "euclidean",
-            max_time=r.get("max_time", positive_or_inf, d["max_time"]),
             coordinates=coords,
             P=P,
             given=r.given,
@@ -464,6 +589,13 @@ class ContractionSettings:
 
 
 # ------------------------------------------------------------------------------ [l1drac]
+#: The L1-DRAC design objectives; their meanings are documented at
+#: :data:`drip_cert.bounds.l1drac.request.OBJECTIVES`.
+
+ContractionSettings.KEYS = table_keys(ContractionSettings)
+L1_OBJECTIVES = ("default", "rho_at_Ts", "Ts_at_rho", "min_rho")
+
+
 @dataclass(frozen=True)
 class L1Settings:
     """``[l1drac]``: the user's inputs of the L1-DRAC design (L1-DRAC Sec. 3.2).
@@ -475,48 +607,46 @@ class L1Settings:
     with ``rho_budget``, else ``"default"`` (:func:`l1_objective`).
     """
 
-    p: int = 1
-    p_star: int | None = None
-    lambda_s: float | None = None
-    omega: float | None = None
-    Ts: float | None = None
-    rho_r: float | None = None
-    rho_a: float | None = None
-    delta: float | None = None
-    alpha: float | None = None
-    eps_r: float = 1e-3  #: slack of (16a)
-    eps_a: float = 1e-3  #: slack of (16b)
-    lip_f: bool | None = None
-    objective: str | None = None  #: None: inferred from Ts / rho_budget (see L1_OBJECTIVES)
-    rho_budget: float | None = None  #: largest acceptable rho = rho_r + rho_a
-    front: bool = True  #: compute the (Ts, rho) Pareto front
+    p: int = setting(1, "moment order of the bound, an integer >= 1", positive_int)
+    p_star: int | None = setting(
+        None, "highest moment order of L1-DRAC Assumption 1, an integer >= p (default p)"
+    )
+    lambda_s: float | None = setting(None, "predictor pole (15c)", positive_float, example=10.0)
+    omega: float | None = setting(None, "filter bandwidth (15a)", positive_float, example=50.0)
+    Ts: float | None = setting(None, "sampling period (15b)", positive_float, example=1e-3)
+    rho_r: float | None = setting(None, "radius of (16a)", positive_float, example=1.0)
+    rho_a: float | None = setting(None, "radius of (16b)", positive_float, example=1.0)
+    delta: float | None = setting(
+        None, "violation probability of kappa (130a)", probability, example=0.05
+    )
+    alpha: float | None = setting(None, "initial distance W_2p of (18a)", nonneg_float, example=0.0)
+    eps_r: float = setting(1e-3, "slack of (16a)", positive_float)
+    eps_a: float = setting(1e-3, "slack of (16b)", positive_float)
+    lip_f: bool | None = setting(
+        None, "whether L1-DRAC Assumption 8 is used", boolean, example=True
+    )
+    objective: str | None = setting(
+        None,
+        'what the design optimises: "default" (the smallest rho at Ts = 1e-3 s, else the '
+        'largest Ts of the front that is not a knife edge), "rho_at_Ts" (Ts given), '
+        '"Ts_at_rho" (rho_budget given) or "min_rho" (the infimum of rho)',
+        one_of,
+        L1_OBJECTIVES,
+    )
+    rho_budget: float | None = setting(
+        None, "largest acceptable rho = rho_r + rho_a of (17)", positive_float, example=100.0
+    )
+    front: bool = setting(True, "compute the (Ts, rho) Pareto front of verified designs", boolean)
     given: frozenset[str] = field(default=frozenset(), compare=False, repr=False)
 
-    KEYS = MappingProxyType(
-        {
-            "p": "moment order of the bound, an integer >= 1",
-            "p_star": "highest moment order of L1-DRAC Assumption 1, an integer >= p",
-            "lambda_s": "predictor pole (15c)",
-            "omega": "filter bandwidth (15a)",
-            "Ts": "sampling period (15b)",
-            "rho_r": "radius of (16a)",
-            "rho_a": "radius of (16b)",
-            "delta": "violation probability of kappa (130a)",
-            "alpha": "initial distance W_2p of (18a)",
-            "eps_r": "slack of (16a)",
-            "eps_a": "slack of (16b)",
-            "lip_f": "whether L1-DRAC Assumption 8 is used",
-            "objective": 'what the design optimises: "default" (the smallest rho at Ts = '
-            '1e-3 s, else the largest Ts of the front that is not a knife edge), "rho_at_Ts" '
-            '(Ts given), "Ts_at_rho" (rho_budget given) or "min_rho" (the infimum of rho)',
-            "rho_budget": "largest acceptable rho = rho_r + rho_a of (17)",
-            "front": "compute the (Ts, rho) Pareto front of verified designs",
-        }
-    )
+    KEYS: ClassVar[Mapping[str, str]]
 
     def __post_init__(self) -> None:
+        validate_declared(self, "l1drac")
         if self.p_star is None:
             object.__setattr__(self, "p_star", self.p)
+        where = Field("l1drac", "p_star", None, self.KEYS["p_star"])
+        integer(self.p_star, where, minimum=self.p, rule=f"an integer >= p = {self.p}")
         if self.objective is None:  # the one the values imply (as from_table)
             obj = l1_objective(None, Ts=self.Ts, rho_budget=self.rho_budget)
             object.__setattr__(self, "objective", obj)
@@ -532,19 +662,32 @@ class L1Settings:
             if c not in cls.KEYS
         }
         r = TableReader("l1drac", table, cls.KEYS, path, elsewhere)
-        d = _defaults(cls)
-        p = r.get("p", positive_int, d["p"])
+        p = r.get("p", positive_int, 1)
         p_star = r.get("p_star", integer, p, minimum=p, rule=f"an integer >= p = {p}")
+        others = [f.name for f in declared(cls) if f.name not in L1_DESIGN_KEYS]
         return cls(
+            **read_declared(cls, r, [k for k in others if k not in ("p", "p_star")]),
             p=p,
             p_star=p_star,
             **read_l1_design(r),
-            alpha=r.get("alpha", nonneg_float, None, example=0.0),
-            eps_r=r.get("eps_r", positive_float, d["eps_r"]),
-            eps_a=r.get("eps_a", positive_float, d["eps_a"]),
-            lip_f=r.get("lip_f", boolean, None, example=True),
             given=r.given,
         )
+
+
+#: The keys of ``[l1drac]`` that a ``design-l1`` constants file's ``[design]`` table shares.
+
+L1Settings.KEYS = table_keys(L1Settings)
+L1_DESIGN_KEYS = (
+    "lambda_s",
+    "omega",
+    "Ts",
+    "rho_r",
+    "rho_a",
+    "delta",
+    "objective",
+    "rho_budget",
+    "front",
+)
 
 
 class L1DesignValues(TypedDict):
@@ -560,11 +703,6 @@ class L1DesignValues(TypedDict):
     objective: str | None
     rho_budget: float | None
     front: bool
-
-
-#: The L1-DRAC design objectives; their meanings are documented at
-#: :data:`drip_cert.bounds.l1drac.request.OBJECTIVES`.
-L1_OBJECTIVES = ("default", "rho_at_Ts", "Ts_at_rho", "min_rho")
 
 
 def l1_objective(
@@ -635,20 +773,7 @@ def read_l1_design(r: TableReader) -> L1DesignValues:
     (:attr:`L1Settings.KEYS`).
     """
 
-    def positive(key: str, example: float) -> float | None:
-        return r.get(key, positive_float, None, example=example)
-
-    out: L1DesignValues = {  # read in this order (the order of the error messages)
-        "lambda_s": positive("lambda_s", 10.0),
-        "omega": positive("omega", 50.0),
-        "Ts": positive("Ts", 1e-3),
-        "rho_r": positive("rho_r", 1.0),
-        "rho_a": positive("rho_a", 1.0),
-        "delta": r.get("delta", probability, None, example=0.05),
-        "objective": r.get("objective", one_of, None, L1_OBJECTIVES),
-        "rho_budget": positive("rho_budget", 100.0),
-        "front": r.get("front", boolean, True),
-    }
+    out = cast(L1DesignValues, read_declared(L1Settings, r, L1_DESIGN_KEYS))
     out["objective"] = l1_objective(
         out["objective"],
         Ts=out["Ts"],
@@ -670,56 +795,59 @@ HELDOUT_FROM_DELTA = -1
 class TasilSettings:
     """``[tasil]``: training of the learned policy and the TaSIL certificate."""
 
-    method: str = "tasil"  #: "tasil" | "bc"
-    order: int = 1  #: derivative order of the TaSIL loss (1 or 2)
-    trajectories: int = 20  #: the paper's n
-    #: fresh expert trajectories for the held-out form (3.3 c); 0: none; the default
-    #: :data:`HELDOUT_FROM_DELTA` is replaced by the smallest count at which that form can pass at
-    #: ``delta`` (59 at delta = 0.1; :func:`heldout_default`)
-    heldout: int = -1
-    samples: int = 100  #: k of the uniform partition of [0, T]
-    hidden: tuple[int, ...] = (64, 64)
-    activation: str = "tanh"
-    steps: int = 2000
-    lr: float = 3e-3
-    batch: int = 128
-    seed: int = 0
-    delta: float = 0.1  #: failure probability of rho_TaSIL
-    eta: float = math.inf  #: local delta-ISS radius (the comparison bound is global: inf)
-    tube_radius: float = math.inf  #: R of assumption A2 (global MLP bounds: inf)
-    policy: str | None = None  #: path of a trained policy (.npz); relative to the spec
-    architecture: str = "mlp"  #: "mlp" | "residual" (structure + K x + Lipschitz-bounded MLP)
-    lipschitz_budget: float = math.inf  #: product of the residual MLP's layer norms (residual)
-    max_heldout_gap: float = math.inf  #: train fails (exit 1) when the held-out mean gap exceeds
+    method: str = setting("tasil", "the training loss", one_of, ("tasil", "bc"))
+    order: int = setting(1, "derivative order of the TaSIL loss", one_of, (1, 2))
+    trajectories: int = setting(20, "number n of expert demonstrations", positive_int)
+    #: the default :data:`HELDOUT_FROM_DELTA` is replaced by the smallest count at which the
+    #: held-out form (3.3 c) can pass at ``delta`` (59 at delta = 0.1; :func:`heldout_default`)
+    heldout: int = setting(
+        HELDOUT_FROM_DELTA,
+        "fresh expert trajectories for the held-out form; 0 for none; default the smallest "
+        "count at which that form can pass at delta (59 at delta = 0.1)",
+        nonneg_int,
+    )
+    samples: int = setting(100, "samples k per trajectory on [0, T]", positive_int)
+    hidden: tuple[int, ...] = setting((64, 64), "hidden layer widths of the policy MLP", int_list)
+    activation: str = setting(
+        "tanh", "activation of the policy MLP (smooth)", one_of, ("tanh", "gelu")
+    )
+    steps: int = setting(2000, "training steps", positive_int)
+    lr: float = setting(3e-3, "learning rate", positive_float)
+    batch: int = setting(128, "batch size", positive_int)
+    seed: int = setting(0, "random seed", integer)
+    delta: float = setting(0.1, "failure probability of rho_TaSIL", probability)
+    eta: float = setting(
+        math.inf, "local delta-ISS radius (the comparison bound is global: inf)", positive_or_inf
+    )
+    tube_radius: float = setting(
+        math.inf, "radius R of assumption A2 (global MLP bounds: inf)", positive_or_inf
+    )
+    policy: str | None = setting(
+        None,
+        "path of a trained policy (.npz), relative to the spec",
+        string,
+        example="policy.npz",
+    )
+    architecture: str = setting(
+        "mlp",
+        "policy class: 'mlp', or 'residual' = [policy] structure + K x + MLP",
+        one_of,
+        ("mlp", "residual"),
+    )
+    lipschitz_budget: float = setting(
+        math.inf, "bound on the residual MLP's product of layer spectral norms", positive_or_inf
+    )
+    max_heldout_gap: float = setting(
+        math.inf, "training fails when the held-out mean gap exceeds this", positive_or_inf
+    )
     given: frozenset[str] = field(default=frozenset(), compare=False, repr=False)
 
-    KEYS = MappingProxyType(
-        {
-            "method": "the training loss",
-            "order": "derivative order of the TaSIL loss",
-            "trajectories": "number n of expert demonstrations",
-            "heldout": "fresh expert trajectories for the held-out form; 0 for none; default "
-            "the smallest count at which that form can pass at delta (59 at delta = 0.1)",
-            "samples": "samples k per trajectory on [0, T]",
-            "hidden": "hidden layer widths of the policy MLP",
-            "activation": "activation of the policy MLP (smooth)",
-            "steps": "training steps",
-            "lr": "learning rate",
-            "batch": "batch size",
-            "seed": "random seed",
-            "delta": "failure probability of rho_TaSIL",
-            "eta": "local delta-ISS radius",
-            "tube_radius": "radius R of assumption A2",
-            "policy": "path of a trained policy (.npz), relative to the spec",
-            "architecture": "policy class: 'mlp', or 'residual' = [policy] structure + K x + MLP",
-            "lipschitz_budget": "bound on the residual MLP's product of layer spectral norms",
-            "max_heldout_gap": "training fails when the held-out mean gap exceeds this",
-        }
-    )
+    KEYS: ClassVar[Mapping[str, str]]
 
     def __post_init__(self) -> None:
         if self.heldout == HELDOUT_FROM_DELTA:
             object.__setattr__(self, "heldout", heldout_default(self.delta))
+        validate_declared(self, "tasil")
 
     @classmethod
     def from_table(
@@ -727,28 +855,10 @@ class TasilSettings:
     ) -> TasilSettings:
         """Validate ``[tasil]`` (``n`` is unused; the same signature as the other tables)."""
         r = TableReader("tasil", table, cls.KEYS, path)
-        d = _defaults(cls)
-        return cls(
-            method=r.get("method", one_of, d["method"], ("tasil", "bc")),
-            order=r.get("order", one_of, d["order"], (1, 2)),
-            trajectories=r.get("trajectories", positive_int, d["trajectories"]),
-            heldout=r.get("heldout", nonneg_int, d["heldout"]),
-            samples=r.get("samples", positive_int, d["samples"]),
-            hidden=r.get("hidden", int_list, d["hidden"]),
-            activation=r.get("activation", one_of, d["activation"], ("tanh", "gelu")),
-            steps=r.get("steps", positive_int, d["steps"]),
-            lr=r.get("lr", positive_float, d["lr"]),
-            batch=r.get("batch", positive_int, d["batch"]),
-            seed=r.get("seed", integer, d["seed"]),
-            delta=r.get("delta", probability, d["delta"]),
-            eta=r.get("eta", positive_or_inf, d["eta"]),
-            tube_radius=r.get("tube_radius", positive_or_inf, d["tube_radius"]),
-            policy=r.get("policy", string, d["policy"], example="policy.npz"),
-            architecture=r.get("architecture", one_of, d["architecture"], ("mlp", "residual")),
-            lipschitz_budget=r.get("lipschitz_budget", positive_or_inf, d["lipschitz_budget"]),
-            max_heldout_gap=r.get("max_heldout_gap", positive_or_inf, d["max_heldout_gap"]),
-            given=r.given,
-        )
+        return cls(**read_declared(cls, r), given=r.given)
+
+
+TasilSettings.KEYS = table_keys(TasilSettings)
 
 
 def heldout_default(delta: float) -> int:
@@ -768,26 +878,19 @@ class SimSettings:
     """``[simulation]``: practical parameters for Monte-Carlo runs that cannot use the certified
     ones. The L1-DRAC defaults are those of the authors' Julia examples (``T_s = 10 dt``)."""
 
-    dt: float = 1e-3
-    paths: int = 1000
-    chunk_size: int = 2048
-    omega: float = 50.0
-    lambda_s: float = 10.0
-    Ts: float = 0.01
-    record_every: int = 10
+    dt: float = setting(1e-3, "Euler time step of the Monte Carlo", positive_float)
+    paths: int = setting(1000, "number of simulated paths", positive_int)
+    chunk_size: int = setting(2048, "paths simulated at once", positive_int)
+    omega: float = setting(50.0, "practical filter bandwidth of L1-DRAC", positive_float)
+    lambda_s: float = setting(10.0, "practical predictor pole of L1-DRAC", positive_float)
+    Ts: float = setting(0.01, "practical sampling period of L1-DRAC", positive_float)
+    record_every: int = setting(10, "record the state every this many steps", positive_int)
     given: frozenset[str] = field(default=frozenset(), compare=False, repr=False)
 
-    KEYS = MappingProxyType(
-        {
-            "dt": "Euler time step of the Monte Carlo",
-            "paths": "number of simulated paths",
-            "chunk_size": "paths simulated at once",
-            "omega": "practical filter bandwidth of L1-DRAC",
-            "lambda_s": "practical predictor pole of L1-DRAC",
-            "Ts": "practical sampling period of L1-DRAC",
-            "record_every": "record the state every this many steps",
-        }
-    )
+    KEYS: ClassVar[Mapping[str, str]]
+
+    def __post_init__(self) -> None:
+        validate_declared(self, "simulation")
 
     @classmethod
     def from_table(
@@ -795,20 +898,14 @@ class SimSettings:
     ) -> SimSettings:
         """Validate ``[simulation]`` (``n`` is unused; the same signature as the other tables)."""
         r = TableReader("simulation", table, cls.KEYS, path)
-        d = _defaults(cls)
-        return cls(
-            dt=r.get("dt", positive_float, d["dt"]),
-            paths=r.get("paths", positive_int, d["paths"]),
-            chunk_size=r.get("chunk_size", positive_int, d["chunk_size"]),
-            omega=r.get("omega", positive_float, d["omega"]),
-            lambda_s=r.get("lambda_s", positive_float, d["lambda_s"]),
-            Ts=r.get("Ts", positive_float, d["Ts"]),
-            record_every=r.get("record_every", positive_int, d["record_every"]),
-            given=r.given,
-        )
+        return cls(**read_declared(cls, r), given=r.given)
 
 
 # ------------------------------------------------------------------------------ [constants]
+
+SimSettings.KEYS = table_keys(SimSettings)
+
+
 @dataclass(frozen=True)
 class ConstantsTable:
     """``[constants]``: values of paper constants the user knows better than the computed ones
@@ -846,6 +943,18 @@ class Settings:
     simulation: SimSettings = SimSettings()
     constants: ConstantsTable = ConstantsTable()
     present: frozenset[str] = frozenset()
+
+    @staticmethod
+    def table_classes() -> dict[str, Any]:
+        """The settings class of each settings table, in the order of :data:`TABLES`."""
+        classes = {
+            "constants": ConstantsTable,
+            "contraction": ContractionSettings,
+            "l1drac": L1Settings,
+            "tasil": TasilSettings,
+            "simulation": SimSettings,
+        }
+        return {name: classes[name] for name in TABLES}
 
     @classmethod
     def from_tables(
