@@ -27,6 +27,7 @@ LAYERS: dict[str, int] = {
     "errors": 1,
     "provenance": 1,
     "progress": 1,
+    "vocabulary": 1,  # the names of the simulated processes and gaps (sim and validate)
     "_jax": 2,
     "numerics": 2,
     "schema": 2,  # the output layouts (JSON Schema files) and their loader

@@ -15,6 +15,7 @@ import numpy as np
 
 from drip_cert.control.l1drac import L1Params
 from drip_cert.errors import SpecError
+from drip_cert.vocabulary import DEFAULT_SCENARIOS, GAPS, SCENARIOS
 
 __all__ = [
     "DEFAULT_SCENARIOS",
@@ -28,19 +29,6 @@ __all__ = [
     "SimConfig",
 ]
 
-SCENARIOS = (
-    "expert_nominal",
-    "learned_nominal",
-    "learned_true",
-    "learned_l1_true",
-    "nominal_sde",
-)
-"""Every process the engine can simulate. ``nominal_sde`` is L1-DRAC's nominal process (4b) when
-the known diffusion ``p`` is not zero: ``dX* = (f + g pi_IL)(t, X*) dt + p(t, X*) dW`` from
-``xi ~ D``, driven by the Brownian path of the true processes (a synchronous coupling)."""
-
-DEFAULT_SCENARIOS = SCENARIOS[:4]
-"""The four processes of the DRIP paper (the default of :attr:`SimConfig.scenarios`)."""
 
 STATUS_OK = 0
 """A path that stayed finite and below ``divergence_cap``."""
@@ -49,17 +37,6 @@ STATUS_NONFINITE = 1
 STATUS_CAP = 2
 """A path frozen at its last good state after its norm exceeded ``divergence_cap``."""
 
-GAPS = (
-    # name, process a, process b: r_t = ||a_t - b_t||
-    ("policy", "learned_nominal", "expert_nominal"),
-    ("total_true", "learned_true", "expert_nominal"),
-    ("uncertainty_true", "learned_true", "learned_nominal"),
-    ("total_l1", "learned_l1_true", "expert_nominal"),
-    ("uncertainty_l1", "learned_l1_true", "learned_nominal"),
-    # with a known diffusion p != 0, L1-DRAC's radius is a distance to the SDE (4b), not to x'
-    ("uncertainty_true_sde", "learned_true", "nominal_sde"),
-    ("uncertainty_l1_sde", "learned_l1_true", "nominal_sde"),
-)
 
 POLICY_DTYPES = ("float64", "float32")
 """Dtypes the learned policy can be evaluated in (:attr:`SimConfig.policy_dtype`)."""

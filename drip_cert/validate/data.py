@@ -51,6 +51,7 @@ from drip_cert.validate.checks import (
     overall_status,
 )
 from drip_cert.validate.run import ValidationReport, _thresholds
+from drip_cert.vocabulary import GAPS, SCENARIOS
 
 __all__ = [
     "DEFAULT_LEVEL",
@@ -63,26 +64,6 @@ __all__ = [
     "validate_data",
 ]
 
-SCENARIOS = (
-    "expert_nominal",
-    "learned_nominal",
-    "learned_true",
-    "learned_l1_true",
-    "nominal_sde",
-)
-"""The processes (:data:`drip_cert.sim.config.SCENARIOS`; a test keeps them equal): the four of
-the paper, and L1-DRAC's nominal SDE (4b) for a system with a known diffusion."""
-
-GAPS = (
-    ("policy", "learned_nominal", "expert_nominal"),
-    ("total_true", "learned_true", "expert_nominal"),
-    ("uncertainty_true", "learned_true", "learned_nominal"),
-    ("total_l1", "learned_l1_true", "expert_nominal"),
-    ("uncertainty_l1", "learned_l1_true", "learned_nominal"),
-    ("uncertainty_true_sde", "learned_true", "nominal_sde"),
-    ("uncertainty_l1_sde", "learned_l1_true", "nominal_sde"),
-)
-"""The gaps ``(name, a, b)``, ``r_t = ||a_t - b_t||`` (:data:`drip_cert.sim.config.GAPS`)."""
 
 L1_GAPS = ("total_l1", "uncertainty_l1")
 """The gaps that read the L1-DRAC process ``learned_l1_true``."""
