@@ -364,3 +364,17 @@ def test_a_new_setting_is_one_declaration():
         TableReader("demo", {"widget": 1}, keys)
     with pytest.raises(SpecError, match=r"widgets"):
         Demo(widgets=-2)
+
+
+def test_design_request_uses_the_declared_readers():
+    """``DesignRequest`` (the designer's Python input) checks the keys it shares with
+    ``[l1drac]`` by the same declared readers, so both say the same thing for the same value."""
+    from drip_cert.bounds.l1drac.request import DesignRequest
+
+    with pytest.raises(SpecError) as spec_err:
+        L1Settings(delta=1.5)
+    with pytest.raises(SpecError) as req_err:
+        DesignRequest(p=1, delta=1.5)
+    assert str(spec_err.value).split(": ", 1)[1] == str(req_err.value).split(": ", 1)[1]
+    with pytest.raises(SpecError, match=r"design\.p.*positive integer"):
+        DesignRequest(p=True)  # a boolean is not a moment order

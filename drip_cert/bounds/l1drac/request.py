@@ -10,9 +10,15 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
-from drip_cert.bounds.l1drac.constants import check_int, check_real
+from drip_cert.bounds.l1drac.constants import check_real
 from drip_cert.errors import SpecError
-from drip_cert.spec.settings import L1_OBJECTIVES, l1_objective
+from drip_cert.spec.settings import (
+    L1_DESIGN_KEYS,
+    L1_OBJECTIVES,
+    L1Settings,
+    l1_objective,
+    validate_declared,
+)
 
 __all__ = ["DesignRequest", "OBJECTIVES", "PRACTICAL_TS"]
 
@@ -34,6 +40,9 @@ OBJECTIVES = L1_OBJECTIVES
 #: microcontroller samples. A design is sought here first; a faster ``Ts`` is accepted only when
 #: 1 kHz is infeasible, and then with a note.
 PRACTICAL_TS = 1e-3
+
+#: The request's keys that a spec's ``[l1drac]`` table declares (and checks) too.
+SHARED = L1_DESIGN_KEYS
 
 
 def _positive(name: str, value: Any) -> float:
@@ -91,16 +100,15 @@ class DesignRequest:
     front: bool = True
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "p", check_int("design.p", self.p, where="the design", path=None))
+        # the keys [l1drac] shares with this request are checked by the readers declared once
+        # on L1Settings (the same rules and messages as a spec or a design-l1 file)
+        validate_declared(self, "design", ("p", *SHARED), source=L1Settings)
+        object.__setattr__(self, "p", int(self.p))
         object.__setattr__(self, "practical_Ts", _positive("practical_Ts", self.practical_Ts))
-        for name in ("lambda_s", "omega", "Ts", "rho_r", "rho_a", "delta", "rho_budget"):
+        for name in SHARED:
             value = getattr(self, name)
-            object.__setattr__(self, name, None if value is None else _positive(name, value))
-        if self.delta is not None and not self.delta < 1.0:
-            raise SpecError(
-                f"{self.delta!r} is not a probability in (0, 1); give e.g. 1e-3",
-                field="design.delta",
-            )
+            if name not in ("objective", "front") and value is not None:
+                object.__setattr__(self, name, float(value))
         for name in ("omega_bounds", "lambda_s_bounds"):
             b = getattr(self, name)
             if b is None:
