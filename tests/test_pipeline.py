@@ -31,16 +31,15 @@ MAX_BOXES = 100
 def _small(spec: Spec) -> Spec:
     """The spec with a small [tasil] (few trajectories, a small network) and a small work budget,
     without [l1drac] (faster)."""
-    tables = {k: v for k, v in spec.tables.items() if k != "l1drac"}
-    tables["tasil"] = {
-        "steps": STEPS,
-        "trajectories": 8,
-        "heldout": 16,
-        "samples": 50,
-        "hidden": [8, 8],
-    }
-    tables["contraction"] = {**tables.get("contraction", {}), "max_boxes": MAX_BOXES}
-    return Spec(spec.path, spec.system, tables)
+    st = spec.settings
+    tasil = dataclasses.replace(
+        st.tasil, steps=STEPS, trajectories=8, heldout=16, samples=50, hidden=(8, 8)
+    )
+    contraction = dataclasses.replace(st.contraction, max_boxes=MAX_BOXES)
+    present = (st.present - {"l1drac"}) | {"tasil", "contraction"}
+    return spec.with_settings(
+        dataclasses.replace(st, tasil=tasil, contraction=contraction, present=present)
+    )
 
 
 @pytest.fixture(scope="module")
@@ -65,13 +64,17 @@ def test_certify_redraws_the_same_demonstrations_from_the_same_seed(run):
     whose [tasil] seed is the pipeline's seed (demonstrations redrawn), give the same TaSIL bound;
     a different seed gives different data, hence (generically) a different h0."""
     spec = run.spec  # carries the trained policy
-    tables = dict(spec.tables)
-    redraw = Spec(spec.path, spec.system, {**tables, "tasil": {**tables["tasil"], "seed": SEED}})
-    again = certify(redraw)
+    st = spec.settings
+
+    def seeded(seed: int) -> Spec:
+        return spec.with_settings(
+            dataclasses.replace(st, tasil=dataclasses.replace(st.tasil, seed=seed))
+        )
+
+    again = certify(seeded(SEED))
     assert again.tasil.h0 == run.certificate.tasil.h0
     assert again.tasil.rho == run.certificate.tasil.rho
-    other = Spec(spec.path, spec.system, {**tables, "tasil": {**tables["tasil"], "seed": SEED + 1}})
-    assert certify(other).tasil.h0 != run.certificate.tasil.h0
+    assert certify(seeded(SEED + 1)).tasil.h0 != run.certificate.tasil.h0
 
 
 def test_certify_accepts_a_bare_system_and_a_policy(run):

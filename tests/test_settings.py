@@ -242,19 +242,34 @@ def test_written_values_are_typed(tmp_path):
     assert isinstance(st.simulation.dt, float) and st.simulation.paths == 7
     assert dict(st.constants.values) == {"L_mu": 0.0, "lambda": 2.0}
     assert st.present == {"contraction", "l1drac", "tasil", "simulation", "constants"}
-    # the raw tables stay available
-    assert spec.table("simulation")["paths"] == 7
+    assert not hasattr(spec, "tables")  # one source of truth: the settings
 
 
 def test_spec_rebuilt_from_tables_and_with_system(tmp_path):
     from drip_cert.spec.load import Spec
 
     spec = load_spec(write(tmp_path, "[simulation]\npaths = 7"))
-    again = Spec(spec.path, spec.system, spec.tables)
+    again = Spec(spec.path, spec.system, {"simulation": {"paths": 7}})
     assert again.settings == spec.settings
     assert spec.with_system(spec.system).settings is spec.settings
     with pytest.raises(SpecError, match="simulation.dt"):
         Spec(spec.path, spec.system, {"simulation": {"dt": -1}})
+    with pytest.raises(SpecError, match="either settings or tables"):
+        Spec(spec.path, spec.system, {"simulation": {"paths": 7}}, spec.settings)
+
+
+def test_spec_in_coordinates_maps_the_system_and_the_region(tmp_path):
+    """``Spec.in_coordinates(Theta)``: the z-system is the exact transform, the contraction
+    region the box enclosing the image of the x-region, the analysis in z as it is."""
+    import numpy as np
+
+    spec = load_spec(write(tmp_path, '[contraction]\nregion = [[-2, 2], [-3, 3]]\nmetric = "auto"'))
+    theta = np.array([[2.0, 0.0], [1.0, 1.0]])
+    z = spec.in_coordinates(theta)
+    assert z.settings.contraction.region == ((-4.0, 4.0), (-5.0, 5.0))  # |2x1|, |x1 + x2|
+    assert z.settings.contraction.coordinates == "euclidean" and not z.settings.contraction.metric
+    assert z.settings.tasil == spec.settings.tasil and z.path == spec.path
+    assert z.system.support == ((-2.0, 2.0), (-2.0, 2.0))  # support [-1, 1]^2 mapped
 
 
 # ------------------------------------------------------------------ valid specs

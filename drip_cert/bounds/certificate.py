@@ -18,7 +18,6 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
-import sympy as sp
 
 from drip_cert.analysis.block_enclosure import block_enclose_callback
 from drip_cert.analysis.constants import (
@@ -37,7 +36,7 @@ from drip_cert.bounds.l1drac.system import l1_section
 from drip_cert.bounds.tasil.tube import expert_tube_bound, horizon_factor_up
 from drip_cert.errors import AssumptionViolation, DripCertError
 from drip_cert.model.fingerprint import Fingerprint, fingerprint_of
-from drip_cert.model.system import System, box_image
+from drip_cert.model.system import System
 from drip_cert.numerics.rounding import div_up, mul_up, up
 from drip_cert.progress import Stages
 from drip_cert.provenance import (
@@ -633,14 +632,7 @@ def _certify_in_metric(
     spec: Spec, change: CoordinateChange, demonstrations: DemonstrationSet | None, stage: Stages
 ) -> Certificate:
     """The certificate of the equivalent system in ``z = Theta x``, labelled with ``change``."""
-    Th = sp.Matrix(change.theta.tolist()).applyfunc(sp.Rational)
-    zsys = spec.system.transformed(change.theta)
-    tables = {k: dict(v) for k, v in spec.tables.items()}
-    ctab = tables.setdefault("contraction", {})
-    ctab["metric"] = "euclidean"
-    if "region" in ctab:
-        ctab["region"] = [list(b) for b in box_image(Th, ctab["region"])]
-    zspec = Spec(spec.path, zsys, tables, expert_gain=spec.expert_gain)  # its note is about x
+    zspec = spec.in_coordinates(change.theta)
     demos = demonstrations
     if demos is None and spec.system.learned is not None:
         from drip_cert.learn.imitation import demonstration_set  # jax: keep off the API's path

@@ -18,18 +18,19 @@ import math
 import os
 import tomllib
 from collections.abc import Mapping
-from dataclasses import dataclass, field, replace
+from dataclasses import InitVar, dataclass, replace
 from pathlib import Path
 from types import MappingProxyType
 from typing import Any
 
+import numpy as np
 import sympy as sp
 
 from drip_cert.errors import InputTypeError, SpecError
 from drip_cert.model.blocks import Block, load_mlp_block
 from drip_cert.model.expr import CONSTANTS, FUNCTIONS, parse_expression
 from drip_cert.model.literals import DecimalFloat
-from drip_cert.model.system import System
+from drip_cert.model.system import System, box_image
 from drip_cert.numerics.user_files import input_file, reading
 from drip_cert.spec.linear import ExpertGain, gain_expert, linear_dynamics, linearise, lqr_expert
 from drip_cert.spec.settings import TABLES, Settings, toml_text
@@ -100,28 +101,36 @@ REQUIRED = {
 
 @dataclass(frozen=True, eq=False)
 class Spec:
-    """A loaded specification: the :class:`System`, the raw settings tables and their typed,
-    validated form ``settings`` (built from ``tables`` when not given), and ``expert_gain``: how
-    a linear expert ``u = -K x`` was given (``{ K = ... }`` or ``"lqr"``, with ``Q``, ``R`` and
-    the closed-loop eigenvalues; ``None`` for an expert written as expressions)."""
+    """A loaded specification: the :class:`System` and its typed, validated ``settings`` (the one
+    source of truth of every settings table), and ``expert_gain``: how a linear expert
+    ``u = -K x`` was given (``{ K = ... }`` or ``"lqr"``, with ``Q``, ``R`` and the closed-loop
+    eigenvalues; ``None`` for an expert written as expressions).
+
+    ``tables`` (construction only, not stored): raw settings tables as TOML gives them, read into
+    ``settings`` when ``settings`` is not given; ``Spec(None, system)`` has the defaults. A
+    variant of a spec is made from its settings (``dataclasses.replace(spec.settings, ...)`` and
+    :meth:`with_settings`), never by editing tables and reading them again.
+    """
 
     path: Path | None
     system: System
-    tables: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)
+    tables: InitVar[Mapping[str, Mapping[str, Any]] | None] = None
     settings: Settings = None  # type: ignore[assignment]  # built in __post_init__
     expert_gain: ExpertGain | None = None
     structure: tuple[sp.Expr, ...] | None = None  #: [policy] structure (residual policy class)
     structure_text: tuple[str, ...] | None = None  #: the same, as written in the spec
 
-    def __post_init__(self) -> None:
+    def __post_init__(self, tables: Mapping[str, Mapping[str, Any]] | None) -> None:
         if self.settings is None:
             settings = Settings.from_tables(
-                self.tables,
+                tables or {},
                 self.system.n,
                 path=None if self.path is None else str(self.path),
                 support=self.system.support,
             )
             object.__setattr__(self, "settings", settings)
+        elif tables is not None:
+            raise SpecError("give a Spec either settings or tables, not both")
 
     @property
     def notes(self) -> tuple[str, ...]:
@@ -129,10 +138,23 @@ class Spec:
         gain expert: given K, or LQR with its Q, R and closed-loop eigenvalues)."""
         return () if self.expert_gain is None else (self.expert_gain.note,)
 
-    def table(self, name: str) -> Mapping[str, Any]:
-        """A raw settings table (``constants``, ``contraction``, ``l1drac``, ``tasil``,
-        ``simulation``); empty when absent. Prefer the typed ``settings``."""
-        return self.tables.get(name, MappingProxyType({}))
+    def with_settings(self, settings: Settings) -> Spec:
+        """The same spec with other (already validated) settings."""
+        return replace(self, settings=settings)
+
+    def in_coordinates(self, theta: Any) -> Spec:
+        """The equivalent spec in ``z = Theta x`` (a constant invertible ``Theta``, numbers taken
+        as the exact rationals they store): the system transformed exactly
+        (:meth:`System.transformed`), the contraction region mapped to the box enclosing its
+        image, and the analysis asked for in those coordinates as they are (``metric =
+        "euclidean"``: ``z`` already is the metric's coordinates). ``expert_gain`` keeps its note
+        about ``x``."""
+        Th = sp.Matrix(np.asarray(theta).tolist()).applyfunc(sp.Rational)
+        zsys = self.system.transformed(theta)
+        c = self.settings.contraction
+        region = None if c.region is None else box_image(Th, c.region)
+        contraction = replace(c, region=region, metric=False, coordinates="euclidean", P=None)
+        return replace(self, system=zsys, settings=replace(self.settings, contraction=contraction))
 
     def with_system(self, system: System) -> Spec:
         """The same spec (file, tables, settings) with another system (e.g. with a learned
@@ -497,7 +519,6 @@ def spec_from_dict(doc: Mapping[str, Any], path: Path | None = None) -> Spec:
     return Spec(
         path=path,
         system=system,
-        tables=tables,
         settings=settings,
         expert_gain=expert_gain,
         structure=structure,
