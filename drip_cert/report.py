@@ -195,6 +195,7 @@ def _l1_decomposition_lines(dec: dict[str, Any] | None) -> list[str]:
         f"{100 * b['share']:.1f} % of (1 - k_a) rho_a^2); sampled-data terms (24): "
         f"{100 * dec['sampling_share']:.1f} %; rho_L1(T_s -> 0) = {_f(dec['rho_Ts0'])} "
         f"(front), rho_L1(T_s) = {_f(dec['rho'])}",
+        *_l1_mean_line(dec.get("rho_mean")),
         "",
         "| radius | term | eq | share of (1-k) rho^2 | T_s power | what |",
         "|---|---|---|---|---|---|",
@@ -208,6 +209,21 @@ def _l1_decomposition_lines(dec: dict[str, Any] | None) -> list[str]:
                 f"{100 * term['share']:.3g} % | {term['ts_power']} | {term['what']} |"
             )
     return lines
+
+
+def _l1_mean_line(mean: dict[str, Any] | None) -> list[str]:
+    """The bound of the mean gap max_t E||X_t - X*_t|| (docs/math/l1drac.md section 5.6)."""
+    if not mean:
+        return []
+    by_p = ", ".join(_f(r) for r in mean["by_p"])
+    line = (
+        f"mean gap max_t E||X_t - X*_t|| < {_f(mean['value'])} (rho(p = {mean['p']}) at the same "
+        f"omega, lambda_s, T_s; rho(1..p) = {by_p})"
+    )
+    if mean.get("kappa") is not None:
+        k, kp = _f(mean["kappa"]), mean["kappa_p"]
+        line += f"; best-order kappa({_f(mean['delta'])}) = {k} (p = {kp})"
+    return [line]
 
 
 def _l1_objective_lines(rep: dict[str, Any]) -> list[str]:

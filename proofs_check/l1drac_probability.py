@@ -170,3 +170,108 @@ def check_integer_p(ctx: Context) -> CheckResult:
             f"(0,1) incl. e^(-2k) and neighbours: max (kappa/rho - e)/e = {worst:.2e}"
         ),
     )
+
+
+BEST_ORDER_ETA = 1e-9  # the radii sit this far (relative) above the true norms: Thm 4.1 is strict
+#: the paper-4d constants `certify` uses (examples/l1drac_constants/paper_4d_learned.toml), at the
+#: controller the default design picks at T_s = 1e-3 s: p = 2 (delta = 0.05) with rho(1) < rho(2)
+_PAPER_LEARNED = {
+    "lam": 0.09872795918963721, "Delta_f": 0.12833337758050964, "L_f": 0.10124722424790661,
+    "Delta_star": 2.0000000319590368, "Delta_g": 0.5000000000000002, "Delta_g_dot": 0.0,
+    "Delta_g_perp": 0.0, "Delta_Theta": 8.000000000000004, "Delta_mu": 0.22360679774997913,
+    "L_mu_hat": 0.0, "L_mu": 0.10000000000000003, "Delta_mu_par": 0.8944271909999165,
+    "L_mu_par_hat": 0.0, "L_mu_par": 0.40000000000000013, "Delta_mu_perp": 0.0,
+    "L_mu_perp": 0.0, "L_mu_perp_hat": 0.0, "Delta_sigma": 0.2569759056871061,
+    "L_sigma_hat": 0.0, "L_sigma": 0.10000000000000003, "Delta_sigma_par": 1.0279036227484244,
+    "L_sigma_par_hat": 0.0, "L_sigma_par": 0.40000000000000013, "Delta_sigma_perp": 0.0,
+    "L_sigma_perp": 0.0, "L_sigma_perp_hat": 0.0, "Delta_p": 0.0, "L_p": 0.0, "L_p_hat": 0.0,
+    "Delta_p_par": 0.0, "L_p_par": 0.0, "L_p_par_hat": 0.0, "Delta_p_perp": 0.0, "L_p_perp": 0.0,
+    "L_p_perp_hat": 0.0, "alpha": 0.0, "eps_r": 0.001, "eps_a": 0.001, "p_star": 2, "m": 4,
+    "lip_f": True,
+}  # fmt: skip
+
+
+def _best_order_laws(rng: np.random.Generator, n: int) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Laws of ||Z|| (values, weights): constants and two-point {0, k} laws (where Jensen and
+    Markov are attained) and random heavy-tailed ones."""
+    laws: list[tuple[np.ndarray, np.ndarray]] = []
+    for k in range(n):
+        kind = k % 3
+        if kind == 0:
+            laws.append((np.array([float(rng.exponential())]), np.array([1.0])))
+        elif kind == 1:
+            m = float(np.exp(rng.uniform(-20, -0.1)))
+            laws.append((np.array([0.0, float(rng.exponential())]), np.array([1.0 - m, m])))
+        else:
+            z = rng.lognormal(0.0, rng.uniform(0.1, 2.0), int(rng.integers(2, 500)))
+            laws.append((z, rng.dirichlet(np.ones(z.size))))
+    return laws
+
+
+@register("l1drac.best_order", LABEL + ", best order at one controller (l1drac.md 5.6)")
+def check_best_order(
+    ctx: Context, bound_factor: float = 1.0, same_controller: bool = True
+) -> CheckResult:
+    """Steps 5.6.1-5.6.2 of docs/math/l1drac.md: ``E||Z|| < min_q rho(q)`` and
+    ``P(||Z|| >= min_q rho(q) delta^{-1/(2q)}) < delta`` whenever ``||Z||_{L_2q} < rho(q)`` for
+    every ``q <= p``; and drip-cert's ``rho(q)`` are designs verified at the design's controller.
+
+    ``bound_factor`` scales both claimed bounds (1 is the proved one; 0.99 must fail on the
+    tight laws); ``same_controller=False`` takes each ``rho(q)`` from a design that re-optimises
+    omega for its own order (a different controller: not a bound for the one that runs), which
+    the controller check must reject.
+    """
+    name = "l1drac.best_order"
+    rng = ctx.rng
+    worst = -np.inf
+    for z, w in _best_order_laws(rng, ctx.count(600, 90)):
+        p = int(rng.integers(1, 6))
+        rho = [(1 + BEST_ORDER_ETA) * _lp_norm(z, w, 2 * q) for q in range(1, p + 1)]
+        mean_bound = bound_factor * min(rho)
+        worst = max(worst, (float(w @ z) - mean_bound) / mean_bound)  # must be < 0
+        # the delta of the tight two-point law is its mass; elsewhere a random level
+        delta = float(w[-1]) if z.size == 2 else float(np.exp(rng.uniform(-12, -0.1)))
+        kappa = bound_factor * min(r * delta ** (-1.0 / (2 * q)) for q, r in enumerate(rho, 1))
+        tail = float(w[z >= kappa].sum())
+        worst = max(worst, (tail - delta) / delta)  # must be < 0 (strict)
+    impl = _best_order_impl(same_controller)
+    ok = worst < 0 and impl[0]
+    return result(
+        name,
+        LABEL + ", best order at one controller (l1drac.md 5.6)",
+        holds=bool(ok),
+        residual=worst,
+        detail=(
+            f"constant, two-point and random laws, p <= 5, radii (1 + {BEST_ORDER_ETA:g}) x the "
+            f"norms, bounds x {bound_factor}: max relative (E|Z| - bound, tail - delta) = "
+            f"{worst:.2e}; {impl[1]}"
+        ),
+    )
+
+
+def _best_order_impl(same_controller: bool) -> tuple[bool, str]:
+    """drip-cert's mean_gap_bound on the paper-4d constants: every rho(q) it uses re-designed
+    here at the design's controller and verified, the value their minimum, rho(1) < rho(2)."""
+    from drip_cert.bounds.l1drac import DesignRequest, L1Constants, design, mean_gap_bound
+
+    c = L1Constants(**_PAPER_LEARNED)  # type: ignore[arg-type]
+    d = design(c, DesignRequest(p=2, lambda_s=10.0, Ts=1e-3, delta=0.05, front=False))
+    m = mean_gap_bound(c, d)
+    if m is None:
+        return False, "mean_gap_bound returned None on a feasible design"
+    rho_q = []
+    for q in range(1, d.p + 1):
+        fixed = {"omega": d.omega} if same_controller else {}
+        dq = design(c, DesignRequest(p=q, lambda_s=10.0, Ts=1e-3, front=False, **fixed))
+        same = (dq.omega, dq.lambda_s, dq.Ts) == (m.omega, m.lambda_s, m.Ts)
+        if not (dq.feasible and dq.verified and same):
+            return False, f"rho({q}) not verified at the design's controller (omega {dq.omega})"
+        rho_q.append(min(dq.rho, d.rho) if q == d.p else dq.rho)
+    agree = all(math.isclose(a, b, rel_tol=1e-12) for a, b in zip(rho_q, m.by_p, strict=True))
+    gain = m.value < d.rho and m.kappa is not None and m.kappa < d.kappa
+    ok = agree and gain and m.value == min(rho_q)
+    return ok, (
+        f"paper-4d constants at omega = {d.omega:.6g}, T_s = 1e-3: rho(q) = "
+        f"{', '.join(f'{r:.6g}' for r in rho_q)} re-verified (drip-cert: {m.by_p}), mean bound "
+        f"{m.value:.6g} < rho(p) = {d.rho:.6g}, kappa {m.kappa:.6g} < {d.kappa:.6g}"
+    )

@@ -62,6 +62,15 @@ def test_wrong_young_constant_fails():
     assert check_young(_ctx("iss.young_step"), young_factor=0.9).verdict is Verdict.FAIL
 
 
+def test_best_order_holds_and_fails_on_a_smaller_bound_or_another_controller():
+    from proofs_check.l1drac_probability import check_best_order
+
+    name = "l1drac.best_order"
+    assert check_best_order(_ctx(name)).verdict is Verdict.PASS
+    assert check_best_order(_ctx(name), bound_factor=0.99).verdict is Verdict.FAIL
+    assert check_best_order(_ctx(name), same_controller=False).verdict is Verdict.FAIL
+
+
 def test_wrong_markov_exponent_fails():
     from proofs_check.l1drac_probability import check_markov
 

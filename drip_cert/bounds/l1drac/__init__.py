@@ -20,6 +20,8 @@ One concept per module; each imports only the modules above it in this list:
 * :mod:`~drip_cert.bounds.l1drac.backoff` -- the move of a float design into the interior.
 * :mod:`~drip_cert.bounds.l1drac.result` -- :class:`L1Design`, the designer's result.
 * :mod:`~drip_cert.bounds.l1drac.radii` -- Theorem 4.1: p for delta, kappa, the ultimate bound.
+* :mod:`~drip_cert.bounds.l1drac.mean` -- the mean-gap bound and the best-order kappa at one
+  controller (:func:`mean_gap_bound`).
 * :mod:`~drip_cert.bounds.l1drac.solve` -- the searches at one objective (``solve``).
 * :mod:`~drip_cert.bounds.l1drac.designer` -- :func:`design` (the objectives),
   :func:`pareto_front`, :func:`knife_edge` and :func:`tradeoff_table`.
@@ -49,6 +51,7 @@ from drip_cert.bounds.l1drac.designer import (
     pareto_front,
     tradeoff_table,
 )
+from drip_cert.bounds.l1drac.mean import MeanGapBound, mean_gap_bound
 from drip_cert.bounds.l1drac.radii import kappa_markov, p_for_delta, ultimate_bound
 from drip_cert.bounds.l1drac.request import OBJECTIVES, PRACTICAL_TS, DesignRequest
 from drip_cert.bounds.l1drac.result import FrontPoint, L1Design
@@ -86,4 +89,6 @@ __all__ = [
     "p_for_delta",
     "kappa_markov",
     "ultimate_bound",
+    "MeanGapBound",
+    "mean_gap_bound",
 ]

@@ -31,6 +31,7 @@ from drip_cert.bounds.l1drac.appendix import (
     true_constants,
 )
 from drip_cert.bounds.l1drac.constants import L1Constants, unmatched_gain_a, unmatched_gain_r
+from drip_cert.bounds.l1drac.mean import MeanGapBound, mean_gap_bound
 from drip_cert.bounds.l1drac.result import L1Design
 from drip_cert.bounds.l1drac.sides import (
     gamma_a,
@@ -108,7 +109,8 @@ class L1Decomposition:
 
     ``rho_Ts0`` is the smallest verified ``rho`` on the design's front (the ``T_s -> 0`` end, a
     knife edge in general), ``None`` without a front; ``sampling_share`` is the part of
-    ``(1 - k_a) rho_a^2`` the sampled-data terms (25a-c) take.
+    ``(1 - k_a) rho_a^2`` the sampled-data terms (25a-c) take; ``rho_mean`` the bound of the mean
+    gap ``max_t E||X_t - X*_t||`` at the same controller (:mod:`.mean`, section 5.6).
     """
 
     rho: float
@@ -116,6 +118,7 @@ class L1Decomposition:
     rho_r: RadiusDecomposition
     rho_a: RadiusDecomposition
     rho_Ts0: float | None
+    rho_mean: MeanGapBound | None = None
 
     @property
     def sampling_share(self) -> float:
@@ -128,7 +131,7 @@ class L1Decomposition:
         return max(big.terms, key=lambda t: t.value)
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON-ready: rho, Ts, rho_r, rho_a, rho_Ts0, sampling_share, binding, note."""
+        """JSON-ready: rho, Ts, rho_r, rho_a, rho_Ts0, rho_mean, sampling_share, binding, note."""
         b = self.binding()
         return {
             "rho": json_float(self.rho),
@@ -136,6 +139,7 @@ class L1Decomposition:
             "rho_r": self.rho_r.to_dict(),
             "rho_a": self.rho_a.to_dict(),
             "rho_Ts0": None if self.rho_Ts0 is None else json_float(self.rho_Ts0),
+            "rho_mean": None if self.rho_mean is None else self.rho_mean.to_dict(),
             "sampling_share": json_float(self.sampling_share),
             "binding": {"radius": b.condition, "name": b.name, "share": json_float(b.share)},
             "note": "float64 shares of (1 - k) rho^2 at the returned design, a_w = |2 lambda - "
@@ -216,4 +220,5 @@ def decompose(c: L1Constants, d: L1Design) -> L1Decomposition | None:
         rho_r=RadiusDecomposition("rho_r", rr, lhs_r, _shares(terms_r, lhs_r)),
         rho_a=RadiusDecomposition("rho_a", ra, lhs_a, _shares(terms_a, lhs_a)),
         rho_Ts0=ts0,
+        rho_mean=mean_gap_bound(c, d),
     )
