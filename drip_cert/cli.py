@@ -64,6 +64,15 @@ def cmd_certify(args: argparse.Namespace) -> int:
     spec = load_spec(args.spec)
     cert = certify(spec, progress=not (args.json or args.quiet))
     accepted = cert.certified or (args.allow_estimates and cert.verdict.value == "conditional")
+    if args.figure:
+        from drip_cert.figures_certificate import certificate_figure  # matplotlib: off start-up
+
+        certificate_figure(
+            cert.to_dict(),
+            args.figure,
+            support_x=spec.system.support,
+            states_x=[str(x) for x in spec.system.states],
+        )
     if args.json:
         out = cert.to_dict()
         out["accepted"] = {
@@ -239,7 +248,17 @@ def build_parser() -> argparse.ArgumentParser:
         help="exit 0 for a conditional verdict too (one resting on estimates or unproved regions)",
     )
     q.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
-    q.set_defaults(func=cmd_certify, files=[("spec", IN, "specification file")])
+    q.add_argument(
+        "--figure",
+        default=None,
+        metavar="PATH",
+        help="draw the assumption margins and the proved sets (support, proof boxes, invariant "
+        "set) in x here (png, svg or pdf)",
+    )
+    q.set_defaults(
+        func=cmd_certify,
+        files=[("spec", IN, "specification file"), ("figure", FIGURE, "--figure file")],
+    )
 
     q = sub.add_parser("design-l1", help="L1-DRAC parameter feasibility from a constants file")
     q.add_argument("constants")
