@@ -587,3 +587,45 @@ def test_onnx_gelu_written_as_erf_arithmetic_is_read_as_gelu(tmp_path, variant):
     onnx.save(model, str(f))
     with pytest.raises(SpecError, match="not supported|Erf"):
         load_network(f)
+
+
+MIXED_SPEC = """
+[system]
+name = "onnx_mixed"
+states = ["x1", "x2"]
+inputs = ["u"]
+horizon = 2.0
+[blocks.r]
+kind = "mlp"
+weights = "mixed.onnx"
+[dynamics]
+f = ["-3*x1 + x2", "-x1 - 3*x2"]
+g = [["0"], ["1"]]
+[policy]
+expert = ["-x2"]
+learned = ["-x2 + r(x)[0]"]
+[initial]
+support = [[-1.0, 1.0], [-1.0, 1.0]]
+"""
+
+
+@pytest.mark.slow  # certify with demonstrations and TaSIL forms: 75-100 s each, 2 loaded cores
+@pytest.mark.parametrize(
+    "acts", [["Tanh", "Sigmoid", None], [("LeakyRelu", {"alpha": 0.125}), "Tanh", None]]
+)
+def test_a_mixed_onnx_network_with_scaling_is_certified_end_to_end(tmp_path, capsys, acts):
+    """A torch-layout ONNX network with a different activation per layer, input scaling and
+    output scaling, as the residual of a policy on a contracting plant: certified end to end
+    (smooth: the lemma route; with a leaky relu: the comparison and uniform forms)."""
+    from drip_cert.cli import main
+
+    ws, bs = _weights((2, 8, 8, 1), seed=30)
+    ws = [0.5 * w for w in ws]  # a small residual: Lip(r) well below the plant's rate 3
+    _torch_like_onnx(tmp_path / "mixed.onnx", ws, bs, acts, in_scale=[0.5, 2.0], out_scale=[0.25])
+    (tmp_path / "s.toml").write_text(MIXED_SPEC)
+    assert main(["certify", str(tmp_path / "s.toml"), "--json"]) == 0
+    cert = json.loads(capsys.readouterr().out)
+    assert cert["verdict"] == "certified"
+    assert cert["parts"]["contraction"]["verdict"] == "certified"
+    assert cert["parts"]["tasil"]["verdict"] == "certified"
+    assert cert["contraction"]["learned"]["scope"]["box"] is None  # a global rate
