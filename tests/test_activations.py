@@ -209,6 +209,7 @@ def test_registry_parses_names_and_parameters():
         "identity",
         "relu",
         "leaky_relu",
+        "prelu",
         "tanh",
         "sigmoid",
         "softplus",
@@ -265,3 +266,39 @@ def test_centred_jacobian_enclosure_contains_sampled_jacobians(activation):
     X = lo + rng.random((500, 2)) * (hi - lo)
     J = np.asarray(jax.vmap(jax.jacfwd(lambda x: m.apply_jax(x[None, :])[0]))(jnp.asarray(X)))
     assert np.all(J >= jlo[0] - AUTODIFF_ROUNDING) and np.all(J <= jhi[0] + AUTODIFF_ROUNDING)
+
+
+def test_prelu_is_leaky_relu_unit_by_unit():
+    """Per-unit slopes (nn.PReLU(num_parameters=n)): every enclosure of unit i is that of
+    leaky_relu(alpha_i); the global constants are the hull over the units; the spec string
+    parses back; an MLP checks the slope count against the layer width."""
+    slopes = (0.0, 0.1, 0.5, 2.0)
+    act = get_activation(f"prelu({', '.join(map(repr, slopes))})")
+    assert act.slopes == slopes and get_activation(act.spec) == act and not act.smooth
+    rng = np.random.default_rng(5)
+    lo = rng.uniform(-2, 1, (50, 4))
+    hi = lo + rng.uniform(0, 2, (50, 4))
+    lo[0], hi[0] = 0.0, 0.0  # a degenerate interval at the kink: both slopes (Clarke)
+    for i, a in enumerate(slopes):
+        leaky = get_activation(f"leaky_relu({a!r})")
+        for mine, ref in zip(
+            (act.enclose(lo, hi), act.slope_range(lo, hi)),
+            (leaky.enclose(lo[:, i], hi[:, i]), leaky.slope_range(lo[:, i], hi[:, i])),
+        ):
+            np.testing.assert_array_equal(mine[0][:, i], ref[0])
+            np.testing.assert_array_equal(mine[1][:, i], ref[1])
+        z = rng.normal(size=(30, 4))
+        np.testing.assert_array_equal(act.value_np(z)[:, i], leaky.value_np(z[:, i]))
+        np.testing.assert_array_equal(act.prime_np(z)[:, i], leaky.prime_np(z[:, i]))
+    assert act.second_range(lo, hi) is None
+    b = act.bounds
+    assert (b.slope_lo, b.slope_hi, b.abs_slope, b.abs_curv) == (0.0, 2.0, 2.0, math.inf)
+    z = rng.normal(size=(7, 4))
+    np.testing.assert_array_equal(np.asarray(act.value_jax(jnp.asarray(z))), act.value_np(z))
+    w = rng.normal(size=(4, 3))
+    MLP((w, rng.normal(size=(1, 4))), (np.zeros(4), np.zeros(1)), activations=(act, "identity"))
+    with pytest.raises(SpecError, match="4 per-unit parameters but the layer has 3 units"):
+        MLP((w[:3], rng.normal(size=(1, 3))), (np.zeros(3), np.zeros(1)), activations=(act, None))
+    for bad in ("prelu(0.1, x)", "prelu(0.1, -1)"):
+        with pytest.raises(SpecError):
+            get_activation(bad)

@@ -58,4 +58,46 @@ def test_the_example_is_certified_end_to_end(tmp_path, capsys):
     t = cert["tasil"]
     assert t["rho_form"] == "uniform" and math.isfinite(float(t["rho"]))
     notes = {f["name"]: f["note"] for f in t["forms"]}
-    assert notes["held_out"].startswith("not applicable: the policy's Jacobian is not Lipschitz")
+    # the held-out form from data through the comparison bound (no lemma, no h1)
+    assert (
+        "comparison bound" in notes["held_out"]
+        and "lemma route is not applicable" in (notes["held_out"])
+    )
+    assert notes["threshold"].startswith("not applicable: the policy's Jacobian is not Lipschitz")
+
+
+def _as_safetensors(tmp_path: Path) -> Path:
+    """The example with its network saved as a PyTorch state_dict in safetensors (the layout
+    of nn.Sequential(Linear, ReLU, Linear, ReLU, Linear)), activations given in the table."""
+    from safetensors.numpy import save_file
+
+    spec = _make(tmp_path)
+    mlp = load_spec(spec).system.blocks["pi_il"].mlp
+    assert mlp is not None
+    tensors = {}
+    for k, (w, b) in enumerate(zip(mlp.weights, mlp.biases)):
+        tensors[f"{2 * k}.weight"], tensors[f"{2 * k}.bias"] = w, b
+    save_file(tensors, str(tmp_path / "policy.safetensors"))
+    text = spec.read_text().replace(
+        'weights = "policy.onnx"', 'weights = "policy.safetensors"\nactivation = "relu"'
+    )
+    out = tmp_path / "st.toml"
+    out.write_text(text)
+    return out
+
+
+def test_the_safetensors_copy_loads_as_the_same_network(tmp_path):
+    st = load_spec(_as_safetensors(tmp_path)).system.blocks["pi_il"].mlp
+    ox = load_spec(tmp_path / "spec.toml").system.blocks["pi_il"].mlp
+    assert st is not None and ox is not None
+    assert st.activation_specs == ox.activation_specs
+    for a, b in zip(st.weights + st.biases, ox.weights + ox.biases):
+        np.testing.assert_array_equal(a, b)
+
+
+@pytest.mark.slow
+def test_the_safetensors_copy_is_certified_end_to_end(tmp_path, capsys):
+    assert main(["certify", str(_as_safetensors(tmp_path)), "--json"]) == 0
+    cert = json.loads(capsys.readouterr().out)
+    assert cert["verdict"] == "certified"
+    assert cert["contraction"]["learned"]["method"] == "lipschitz-affine-mlp"

@@ -76,9 +76,14 @@ def test_decomposition_reads_the_coefficients_and_evaluates_the_jacobian():
     assert decompose_jacobian(-sp.eye(2), X, mlps) is None
 
 
-@pytest.mark.parametrize("act", ["tanh", "gelu"])
-@pytest.mark.parametrize("objective", ["mu2", "norm2"])
+@pytest.mark.parametrize(
+    "act, objective",
+    [(a, o) for a in ("tanh", "gelu") for o in ("mu2", "norm2")]
+    + [(a, "mu2") for a in ("sigmoid", "softplus", "silu", "elu(1.0)")],
+)
 def test_box_bounds_dominate_sampled_values(act, objective):
+    """Random-weight networks of every smooth activation: the bound on every box is never below
+    the sampled value, so the rate proved on a box is never above the sampled one."""
     mlp = _mlp(act, seed=1, scale=2.0)
     J, mlps, jac = _loop(mlp, gain=1.0)
     dec = decompose_jacobian(J, X, mlps)
@@ -193,14 +198,18 @@ def test_matrix_bnb_on_a_wider_network_reaches_its_tolerance():
 # ----------------------------------------------------------------- nonsmooth (relu) networks
 
 
-@pytest.mark.parametrize("act", ["relu", "leaky_relu(0.1)"])
+PRELU_16 = "prelu(" + ", ".join(repr(0.05 * k) for k in range(16)) + ")"  # one slope per unit
+
+
+@pytest.mark.parametrize("act", ["relu", "leaky_relu(0.1)", "elu(0.5)", PRELU_16])
 @pytest.mark.parametrize("objective", ["mu2", "norm2"])
 def test_relu_box_bounds_dominate_every_sampled_clarke_jacobian(act, objective):
     """A random-weight relu network's closed loop: the bound on every box is never below the
     sampled value (so the proved rate is never above the sampled one), including boxes that
     cross the kinks, where the sampled Jacobians on both sides are elements of the Clarke
     Jacobian (docs/math/nonsmooth.md)."""
-    mlp = _mlp(act, sizes=(2, 16, 16, 2), seed=7, scale=2.0)
+    m = _mlp("relu", sizes=(2, 16, 16, 2), seed=7, scale=2.0)
+    mlp = MLP(m.weights, m.biases, activations=(act, act, "identity"))
     assert not mlp.smooth
     J, mlps, jac = _loop(mlp, gain=1.0)
     dec = decompose_jacobian(J, X, mlps)

@@ -405,3 +405,227 @@ def test_export_policy_round_trip_is_exact(tmp_path, capsys):
     )
     assert main(["export-policy", str(spec), "--out", str(tmp_path / "g.onnx")]) == 2
     assert "0 MLP blocks" in capsys.readouterr().err
+
+
+# ----------------------------------------------------- mixed layers, scaling, PRelu, GELU as Erf
+
+
+def test_onnx_mixed_activations_with_input_normalisation_and_output_scaling(tmp_path):
+    """A torch-like graph with a different activation on every layer, input normalisation
+    ``(x - mean) / std`` (Sub, Div) before the first Gemm and output scaling ``y * s + o`` (Mul,
+    Add) after the last: one MLP, one activation per layer, agreeing with onnx.reference."""
+    ws, bs = _weights((3, 8, 8, 8, 2), seed=20)
+    mean = np.array([0.5, -1.0, 2.0], np.float32)
+    std = np.array([2.0, 0.5, 4.0], np.float32)
+    scale, offset = np.array([3.0, -0.5], np.float32), np.array([0.25, 1.0], np.float32)
+    inits = [
+        numpy_helper.from_array(mean, "mean"),
+        numpy_helper.from_array(std, "std"),
+        numpy_helper.from_array(offset, "offset"),
+    ]
+    pre = [
+        helper.make_node("Sub", ["input", "mean"], ["xc"], name="/norm/Sub"),
+        helper.make_node("Div", ["xc", "std"], ["xn"], name="/norm/Div"),
+    ]
+    f = _torch_like_onnx(
+        tmp_path / "m.onnx",
+        ws,
+        bs,
+        ["Relu", "Sigmoid", ("LeakyRelu", {"alpha": 0.125}), None],
+        out_scale=scale,
+    )
+    model = onnx.load(str(f))
+    g = model.graph
+    first = next(n for n in g.node if n.op_type == "Gemm")
+    first.input[0] = "xn"
+    last = next(n for n in g.node if n.name == "/MulOut")
+    last.output[0] = "ys0"
+    g.node.insert(list(g.node).index(last) + 1, helper.make_node("Add", ["ys0", "offset"], ["ys"]))
+    for k, n in enumerate(pre):
+        g.node.insert(k, n)
+    g.initializer.extend(inits)
+    onnx.save(model, str(f))
+    mlp = load_network(f, expect_in=3, expect_out=2)
+    assert mlp.activation_specs == ("relu", "sigmoid", "leaky_relu(0.125)", "identity")
+    assert mlp.sizes == (3, 8, 8, 8, 2)  # the scalings are folded into the first and last layers
+    x = np.random.default_rng(21).normal(size=(50, 3)) * 3.0
+    np.testing.assert_allclose(
+        mlp.apply_np(x.astype(np.float32)), _reference(f, x), atol=FLOAT32_AGREE
+    )
+
+
+def test_onnx_errors_name_the_missing_tensor_and_the_input_type(tmp_path, capsys):
+    """A Gemm bias that is neither an initializer nor a Constant is named; an integer graph input
+    is a SpecError (it crashed with a ValueError); ``certify`` exits 2 without a traceback."""
+    from drip_cert.cli import main
+
+    w = numpy_helper.from_array(np.eye(2, dtype=np.float32), "W")
+    f = _bad(
+        tmp_path, [helper.make_node("Gemm", ["input", "W", "bias0"], ["output"], name="g0")], [w]
+    )
+    with pytest.raises(SpecError, match=r"g0.*Gemm.*'bias0' is neither an initializer"):
+        load_network(f)
+    graph = helper.make_graph(
+        [helper.make_node("Relu", ["input"], ["output"], name="r")],
+        "g",
+        [helper.make_tensor_value_info("input", TensorProto.INT64, ["N", 2])],
+        [helper.make_tensor_value_info("output", TensorProto.INT64, ["N", 2])],
+    )
+    model = helper.make_model(graph, opset_imports=[helper.make_opsetid("", 17)])
+    model.ir_version = 8
+    onnx.save(model, str(tmp_path / "h.onnx"))
+    with pytest.raises(SpecError, match=r"input 'input' has element type INT64"):
+        load_network(tmp_path / "h.onnx")
+    (tmp_path / "s.toml").write_text(SPEC.format(weights="h.onnx", extra=""))
+    assert main(["certify", str(tmp_path / "s.toml")]) == 2
+    err = capsys.readouterr().err
+    assert "INT64" in err and "Traceback" not in err
+
+
+def test_onnx_constant_nodes_with_value_float(tmp_path):
+    """``Constant`` nodes holding ``value_float`` / ``value_floats`` (valid ONNX, written by some
+    exporters for scalings) are constants like ``value`` tensors."""
+    nodes = [
+        helper.make_node("Constant", [], ["c"], name="k", value_float=2.0),
+        helper.make_node("Mul", ["input", "c"], ["xs"], name="m"),
+        helper.make_node("Constant", [], ["o"], name="k2", value_floats=[0.5, -1.0]),
+        helper.make_node("Add", ["xs", "o"], ["output"], name="a"),
+    ]
+    mlp = load_network(_bad(tmp_path, nodes, []))
+    np.testing.assert_array_equal(mlp.weights[0], 2.0 * np.eye(2))
+    np.testing.assert_array_equal(mlp.biases[0], [0.5, -1.0])
+
+
+def test_onnx_prelu_with_one_slope_per_unit(tmp_path):
+    """``nn.PReLU(num_parameters=n)`` exports a slope tensor of shape (n,): read as the per-unit
+    PRelu activation, agreeing with onnx.reference; export -> import is exact; a slope tensor of
+    another width names the node."""
+    ws, bs = _weights((2, 6, 1), seed=22)
+    slopes = np.array([0.0, 0.1, 0.25, 0.5, 0.01, 0.2], np.float32)
+    prelu = helper.make_node("PRelu", ["/0/Gemm_output_0", "slope"], ["h"], name="/1/PRelu")
+    f = _torch_like_onnx(tmp_path / "p.onnx", ws, bs, [None, None])
+    model = onnx.load(str(f))
+    g = model.graph
+    second = [n for n in g.node if n.op_type == "Gemm"][1]
+    second.input[0] = "h"
+    g.node.insert(1, prelu)
+    g.initializer.append(numpy_helper.from_array(slopes, "slope"))
+    onnx.save(model, str(f))
+    mlp = load_network(f)
+    assert mlp.activations[0].slopes == tuple(float(a) for a in slopes)
+    assert not mlp.smooth
+    x = np.random.default_rng(23).normal(size=(200, 2)) * 2.0
+    np.testing.assert_allclose(
+        mlp.apply_np(x.astype(np.float32)), _reference(f, x), atol=FLOAT32_AGREE
+    )
+    back = read_onnx(write_onnx(mlp, tmp_path / "back.onnx"))
+    assert back.activations[0] == mlp.activations[0]
+    assert np.max(np.abs(back.apply_np(x) - mlp.apply_np(x))) == EXACT
+    g.initializer[-1].CopyFrom(numpy_helper.from_array(slopes[:4], "slope"))
+    onnx.save(model, str(f))
+    with pytest.raises(SpecError, match=r"/1/PRelu.*shape \(4,\)"):
+        load_network(f)
+
+
+def _gelu_erf_nodes(x: str, out: str, variant: str, dtype=np.float32):
+    """GELU as torch.onnx.export writes nn.GELU() below opset 20 (Constant nodes, float32 sqrt 2);
+    ``variant`` "torch": ``(x * (1 + erf(x / sqrt2))) * 0.5``; "half_first":
+    ``x * ((1 + erf(x * (1/sqrt2))) * 0.5)``."""
+
+    def c(name, v):
+        return helper.make_node(
+            "Constant", [], [name], value=numpy_helper.from_array(np.array(v, dtype), name)
+        )
+
+    p = f"{out}_"
+    if variant == "torch":
+        return [
+            c(p + "s", np.sqrt(2.0)),
+            helper.make_node("Div", [x, p + "s"], [p + "d"], name=p + "Div"),
+            helper.make_node("Erf", [p + "d"], [p + "e"], name=p + "Erf"),
+            c(p + "one", 1.0),
+            helper.make_node("Add", [p + "e", p + "one"], [p + "a"], name=p + "Add"),
+            helper.make_node("Mul", [x, p + "a"], [p + "m"], name=p + "Mul"),
+            c(p + "half", 0.5),
+            helper.make_node("Mul", [p + "m", p + "half"], [out], name=p + "Mul_1"),
+        ]
+    return [
+        c(p + "s", 1.0 / np.sqrt(2.0)),
+        helper.make_node("Mul", [p + "s", x], [p + "d"], name=p + "Mul0"),
+        helper.make_node("Erf", [p + "d"], [p + "e"], name=p + "Erf"),
+        c(p + "one", 1.0),
+        helper.make_node("Add", [p + "one", p + "e"], [p + "a"], name=p + "Add"),
+        c(p + "half", 0.5),
+        helper.make_node("Mul", [p + "a", p + "half"], [p + "m"], name=p + "Mul"),
+        helper.make_node("Mul", [p + "m", x], [out], name=p + "Mul_1"),
+    ]
+
+
+@pytest.mark.parametrize("variant", ["torch", "half_first"])
+def test_onnx_gelu_written_as_erf_arithmetic_is_read_as_gelu(tmp_path, variant):
+    ws, bs = _weights((2, 8, 8, 1), seed=24)
+    f = _torch_like_onnx(tmp_path / "g.onnx", ws, bs, [None, None, None])
+    model = onnx.load(str(f))
+    g = model.graph
+    gemms = [n for n in g.node if n.op_type == "Gemm"]
+    for k, gemm in enumerate(gemms[:2]):  # a GELU after each hidden Gemm
+        act = _gelu_erf_nodes(gemm.output[0], f"/gelu{k}", variant)
+        gemms[k + 1].input[0] = f"/gelu{k}"
+        g.node.insert(list(g.node).index(gemm) + 1, act[0])
+        for j, n in enumerate(act[1:]):
+            g.node.insert(list(g.node).index(gemm) + 2 + j, n)
+    onnx.save(model, str(f))
+    mlp = load_network(f)
+    assert mlp.activation_specs == ("gelu", "gelu", "identity")
+    x = np.random.default_rng(25).normal(size=(100, 2)) * 2.0
+    np.testing.assert_allclose(
+        mlp.apply_np(x.astype(np.float32)), _reference(f, x), atol=FLOAT32_AGREE
+    )
+    # the tanh approximation's constant (or any other) is not GELU: Erf is then unsupported
+    bad = next(n for n in g.node if n.op_type == "Constant")
+    bad.attribute[0].t.CopyFrom(numpy_helper.from_array(np.array(1.5, np.float32), bad.output[0]))
+    onnx.save(model, str(f))
+    with pytest.raises(SpecError, match="not supported|Erf"):
+        load_network(f)
+
+
+MIXED_SPEC = """
+[system]
+name = "onnx_mixed"
+states = ["x1", "x2"]
+inputs = ["u"]
+horizon = 2.0
+[blocks.r]
+kind = "mlp"
+weights = "mixed.onnx"
+[dynamics]
+f = ["-3*x1 + x2", "-x1 - 3*x2"]
+g = [["0"], ["1"]]
+[policy]
+expert = ["-x2"]
+learned = ["-x2 + r(x)[0]"]
+[initial]
+support = [[-1.0, 1.0], [-1.0, 1.0]]
+"""
+
+
+@pytest.mark.slow  # certify with demonstrations and TaSIL forms: 75-100 s each, 2 loaded cores
+@pytest.mark.parametrize(
+    "acts", [["Tanh", "Sigmoid", None], [("LeakyRelu", {"alpha": 0.125}), "Tanh", None]]
+)
+def test_a_mixed_onnx_network_with_scaling_is_certified_end_to_end(tmp_path, capsys, acts):
+    """A torch-layout ONNX network with a different activation per layer, input scaling and
+    output scaling, as the residual of a policy on a contracting plant: certified end to end
+    (smooth: the lemma route; with a leaky relu: the comparison and uniform forms)."""
+    from drip_cert.cli import main
+
+    ws, bs = _weights((2, 8, 8, 1), seed=30)
+    ws = [0.5 * w for w in ws]  # a small residual: Lip(r) well below the plant's rate 3
+    _torch_like_onnx(tmp_path / "mixed.onnx", ws, bs, acts, in_scale=[0.5, 2.0], out_scale=[0.25])
+    (tmp_path / "s.toml").write_text(MIXED_SPEC)
+    assert main(["certify", str(tmp_path / "s.toml"), "--json"]) == 0
+    cert = json.loads(capsys.readouterr().out)
+    assert cert["verdict"] == "certified"
+    assert cert["parts"]["contraction"]["verdict"] == "certified"
+    assert cert["parts"]["tasil"]["verdict"] == "certified"
+    assert cert["contraction"]["learned"]["scope"]["box"] is None  # a global rate

@@ -76,6 +76,7 @@ __all__ = [
     "lipschitz_rate",
     "perturbation_rate",
     "best_global_rate",
+    "difference_jacobian_bound",
     "sup_policy_difference",
 ]
 
@@ -226,24 +227,12 @@ def perturbation_rate(
         return None
     if not expert_rate.scope.all_t or not math.isfinite(expert_rate.value):
         return None
-    delta = sp.ImmutableMatrix(s.learned - s.expert)
-    dec = affine_in_blocks(delta, s)
-    if dec is None:
+    d_norm = difference_jacobian_bound(s, memo)
+    if d_norm is None:
         return None
-    parts = _blocks_sum(s, dec, memo)
-    if parts is None:
-        return None
-    total, lips = parts
     g = np.array(s.g.tolist(), dtype=float)
     g_norm = Quantity.derive(
         "||g||_2", _norm_up(g), method=How.SOUND, source="spectral norm of the constant g"
-    )
-    d_norm = Quantity.derive(
-        "sup||D(pi_IL - pi*)||",
-        add_up(_norm_up(dec.A), total),
-        inputs=lips,
-        method=How.SOUND,
-        source="||A_Delta|| + sum_k ||C_k|| Lip(h_k), all x",
     )
     value = expert_rate.value - mul_up(g_norm.value, d_norm.value)
     # lambda* - (rounded-up product) can round up in the subtraction: step one ulp down
@@ -263,6 +252,29 @@ def perturbation_rate(
     )
     return GlobalRate(
         _result(rate, "perturbation-of-expert", note, t0), rate, (expert_rate, g_norm, d_norm)
+    )
+
+
+def difference_jacobian_bound(s: System, memo: LipMemo | None = None) -> Quantity | None:
+    """``sup_x ||D(pi_IL - pi*)(x)||_2`` on all of ``R^n`` (sound) when ``pi_IL - pi* = A_D x +
+    c_D + sum_k C_k h_k(x)`` is affine in MLP blocks: ``||A_D||_2 + sum_k ||C_k||_2 Lip(h_k)``,
+    rounded up (for a piecewise-linear ``h_k`` a bound on every Clarke Jacobian, so a Lipschitz
+    constant of the difference, docs/math/nonsmooth.md); ``None`` otherwise."""
+    if s.learned is None:
+        return None
+    dec = affine_in_blocks(sp.ImmutableMatrix(s.learned - s.expert), s)
+    if dec is None:
+        return None
+    parts = _blocks_sum(s, dec, memo)
+    if parts is None:
+        return None
+    total, lips = parts
+    return Quantity.derive(
+        "sup||D(pi_IL - pi*)||",
+        add_up(_norm_up(dec.A), total),
+        inputs=lips,
+        method=How.SOUND,
+        source="||A_Delta|| + sum_k ||C_k|| Lip(h_k), all x",
     )
 
 

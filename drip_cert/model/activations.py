@@ -24,7 +24,8 @@ the end enclosures and of the bracket enclosures of every bracket meeting ``[lo,
 extremes are at the piece's ends, which are ``lo``, ``hi`` or points of a bracket.
 
 Registry: :data:`ACTIVATIONS` maps a name to its class; :func:`get_activation` parses
-``"relu"``, ``"leaky_relu(0.2)"``, ``"elu(1.0)"`` (or passes an :class:`Activation` through).
+``"relu"``, ``"leaky_relu(0.2)"``, ``"elu(1.0)"``, ``"prelu(0.1, 0.25, ...)"`` (one slope per
+unit) (or passes an :class:`Activation` through).
 """
 
 from __future__ import annotations
@@ -71,6 +72,7 @@ __all__ = [
     "Gelu",
     "Identity",
     "LeakyRelu",
+    "PRelu",
     "Relu",
     "Sigmoid",
     "Silu",
@@ -181,6 +183,11 @@ class Activation:
     def smooth(self) -> bool:
         """True when ``s'`` is Lipschitz (a second-derivative enclosure exists)."""
         return True
+
+    @property
+    def units(self) -> int | None:
+        """The layer width the activation is made for (per-unit parameters), else ``None``."""
+        return None
 
     @property
     def spec(self) -> str:
@@ -391,6 +398,88 @@ class Relu(LeakyRelu):
 
     def onnx_attributes(self):
         return {}
+
+
+@dataclass(frozen=True)
+class PRelu(Activation):
+    """Leaky relu with one slope per unit (ONNX ``PRelu`` with a slope tensor of the layer
+    width, PyTorch ``nn.PReLU(num_parameters=n)``): ``s_i(z) = z`` for ``z >= 0``,
+    ``alpha_i z`` for ``z < 0`` (every ``alpha_i >= 0``).
+
+    Unit ``i`` is :class:`LeakyRelu` ``(alpha_i)``, so every enclosure is that class's, taken
+    unit by unit (the slopes broadcast along the last axis, which indexes the layer's units in
+    every caller). The global constants (:attr:`bounds`) are the hull over the units:
+    slopes in ``[min(min alpha, 1), max(max alpha, 1)]``, a sector every unit satisfies, which
+    is what the Lipschitz recursions and LipSDP use. Not ``C^1`` unless every slope is 1.
+    """
+
+    slopes: tuple[float, ...] = ()
+    name: ClassVar[str] = "prelu"
+    onnx_op: ClassVar[str] = "PRelu"
+
+    def __post_init__(self) -> None:
+        a = tuple(float(v) for v in self.slopes)
+        if not a:
+            raise SpecError("prelu needs one slope per unit, got none")
+        bad = [v for v in a if not (math.isfinite(v) and v >= 0.0)]
+        if bad:
+            raise SpecError(f"prelu slopes must be finite and >= 0, got {bad[0]!r}")
+        object.__setattr__(self, "slopes", a)
+
+    @property
+    def units(self) -> int | None:
+        return len(self.slopes)
+
+    @property
+    def smooth(self) -> bool:
+        return all(v == 1.0 for v in self.slopes)
+
+    @property
+    def spec(self) -> str:
+        return f"{self.name}({', '.join(repr(v) for v in self.slopes)})"
+
+    def __str__(self) -> str:
+        lo, hi = min(self.slopes), max(self.slopes)
+        return f"{self.name}({len(self.slopes)} slopes in [{lo!r}, {hi!r}])"
+
+    def _a(self) -> np.ndarray:
+        return np.asarray(self.slopes, dtype=np.float64)
+
+    def apply(self, z, xp=np):
+        return xp.where(z >= 0, z, xp.asarray(self._a()) * z)
+
+    def prime_np(self, z):
+        return np.where(_arr(z) > 0, 1.0, self._a())
+
+    def _value_point(self, z):
+        neg = z < 0
+        v = np.where(neg, self._a() * z, z)
+        return np.where(neg, down_np(v), v), np.where(neg, up_np(v), v)
+
+    def enclose(self, lo, hi):
+        lo, hi = _arr(lo), _arr(hi)
+        return self._value_point(lo)[0], self._value_point(hi)[1]
+
+    def slope_range(self, lo, hi):
+        lo, hi = _arr(lo), _arr(hi)
+        a = self._a()
+        has_neg, has_pos = lo <= 0.0, hi >= 0.0  # 0 itself carries both slopes (Clarke)
+        slo = np.where(has_neg & has_pos, np.minimum(a, 1.0), np.where(has_neg, a, 1.0))
+        shi = np.where(has_neg & has_pos, np.maximum(a, 1.0), np.where(has_neg, a, 1.0))
+        return slo.astype(np.float64), shi.astype(np.float64)
+
+    def second_range(self, lo, hi):
+        if self.smooth:
+            return np.zeros_like(_arr(lo)), np.zeros_like(_arr(hi))
+        return None
+
+    @property
+    def bounds(self) -> ActivationBounds:
+        lo, hi = min(min(self.slopes), 1.0), max(max(self.slopes), 1.0)
+        return ActivationBounds(self.spec, lo, hi, hi, 0.0 if self.smooth else math.inf)
+
+    def _limits(self):
+        return (min(min(self.slopes), 1.0), max(max(self.slopes), 1.0)), (0.0, 0.0)
 
 
 # --------------------------------------------------------------------------- tanh, sigmoid
@@ -849,7 +938,8 @@ def _gelu_crits():
 # --------------------------------------------------------------------------- registry
 
 ACTIVATIONS: dict[str, type[Activation]] = {
-    cls.name: cls for cls in (Identity, Relu, LeakyRelu, Tanh, Sigmoid, Softplus, Silu, Elu, Gelu)
+    cls.name: cls
+    for cls in (Identity, Relu, LeakyRelu, PRelu, Tanh, Sigmoid, Softplus, Silu, Elu, Gelu)
 }
 """Every activation by name (one registry: the spec, the readers and the writer use it)."""
 _ALIASES = {"swish": "silu", "linear": "identity"}
@@ -875,6 +965,14 @@ def get_activation(spec: str | Activation | None) -> Activation:
         raise SpecError(f"activation {spec!r} is not one of {known}", field="activation")
     if m.group(2) is None or m.group(2) == "":
         return cls()
+    if cls is PRelu:
+        try:
+            return PRelu(tuple(float(v) for v in m.group(2).split(",")))
+        except ValueError:
+            raise SpecError(
+                f"activation {spec!r}: the slopes {m.group(2)!r} are not numbers separated by "
+                "commas"
+            ) from None
     if cls not in (LeakyRelu, Elu):
         raise SpecError(f"activation {name!r} takes no parameter, got {spec!r}")
     try:

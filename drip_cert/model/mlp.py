@@ -107,6 +107,12 @@ class MLP:
                 )
             if not (np.all(np.isfinite(w)) and np.all(np.isfinite(b))):
                 raise SpecError(f"layer {i}: weights contain NaN or inf")
+            units = acts[i].units
+            if units is not None and units != w.shape[0]:
+                raise SpecError(
+                    f"layer {i}: activation {acts[i]} has {units} per-unit parameters but the "
+                    f"layer has {w.shape[0]} units"
+                )
             prev = w.shape[0]
             w.setflags(write=False)
             b.setflags(write=False)

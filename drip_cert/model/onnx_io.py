@@ -7,9 +7,13 @@ output of
 * affine nodes: ``Gemm`` (``transA = 0``; ``transB``, ``alpha``, ``beta``), ``MatMul`` by a
   constant matrix, ``Add`` / ``Sub`` / ``Mul`` / ``Div`` by a constant (scalar or per feature:
   input and output scaling);
-* element-wise activations: ``Relu``, ``LeakyRelu``, ``PRelu`` (one shared slope),
-  ``Sigmoid``, ``Tanh``, ``Softplus``, ``Elu``, ``Gelu`` (``approximate = "none"``),
-  ``Identity``, and ``x * Sigmoid(x)`` (SiLU, as PyTorch writes ``nn.SiLU``);
+* element-wise activations: ``Relu``, ``LeakyRelu``, ``PRelu`` (one shared slope, or one per
+  unit: a slope tensor of the layer width), ``Sigmoid``, ``Tanh``, ``Softplus``, ``Elu``,
+  ``Gelu`` (``approximate = "none"``), ``Identity``, ``x * Sigmoid(x)`` (SiLU, as PyTorch
+  writes ``nn.SiLU``) and ``x * 0.5 * (1 + Erf(x / sqrt 2))`` (GELU as PyTorch writes
+  ``nn.GELU()`` below opset 20; the constants must equal ``sqrt 2``, ``1``, ``1/2`` up to
+  float32 rounding, and the graph is then read as the exact GELU, which the reference check
+  below confirms);
 
 with constants from initializers or ``Constant`` nodes. Consecutive affine nodes are composed into
 one layer (in float64: exact for the shapes people use up to rounding, which the check below
@@ -35,6 +39,7 @@ tensor slope, and an elu alpha must be a float32 number.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -51,6 +56,7 @@ from drip_cert.model.activations import (
     Gelu,
     Identity,
     LeakyRelu,
+    PRelu,
     Relu,
     Sigmoid,
     Silu,
@@ -74,6 +80,7 @@ N_CHECK = 64  # random inputs of the reference check
 CHECK_SEED = 20231  # their seed (the check is a function of the file)
 _OPSET = 17  # Gemm/activations; Gelu needs 20
 _GELU_OPSET = 20
+_CONST_ULPS = 4  # a pattern constant (sqrt 2, 1/2, 1) may differ from its value by float32 rounding
 
 
 def _err(path: Path, msg: str, fld: str | None) -> SpecError:
@@ -217,12 +224,24 @@ def _convert(model, path: Path, fld: str | None) -> MLP:
     dims = inputs[0].type.tensor_type.shape.dim
     if not dims or not dims[-1].HasField("dim_value"):
         raise _err(path, f"input {inputs[0].name!r} has no fixed feature dimension", fld)
+    elem = inputs[0].type.tensor_type.elem_type
+    if not np.issubdtype(np.dtype(helper.tensor_dtype_to_np_dtype(elem)), np.floating):
+        raise _err(
+            path,
+            f"input {inputs[0].name!r} has element type "
+            f"{TensorProto.DataType.Name(elem)}; a policy takes a float tensor",
+            fld,
+        )
     chain = _Chain(int(dims[-1].dim_value))
     data = inputs[0].name
     consumers: dict[str, list] = {}
     for node in g.node:
         for name in node.input:
             consumers.setdefault(name, []).append(node)
+    for k, node in enumerate(g.node):  # constants first: a pattern may look ahead at them
+        if node.op_type == "Constant":
+            where = f"node {node.name or '#' + str(k)!r} (op type Constant)"
+            consts[node.output[0]] = _constant(_attrs(node), where, path, fld)
     skip: set[int] = set()
     for k, node in enumerate(g.node):
         if k in skip:
@@ -230,12 +249,6 @@ def _convert(model, path: Path, fld: str | None) -> MLP:
         op, attrs = node.op_type, _attrs(node)
         where = f"node {node.name or '#' + str(k)!r} (op type {op})"
         if op == "Constant":
-            if "value" not in attrs:
-                raise _err(path, f"{where}: only tensor constants ('value') are supported", fld)
-            arr = numpy_helper.to_array(attrs["value"])
-            if not np.issubdtype(arr.dtype, np.floating):
-                raise _err(path, f"{where}: constant of dtype {arr.dtype}; only floats", fld)
-            consts[node.output[0]] = arr.astype(np.float64)
             continue
         if op not in SUPPORTED_OPS:
             raise _err(
@@ -253,21 +266,22 @@ def _convert(model, path: Path, fld: str | None) -> MLP:
                 fld,
             )
         others = [i for i in ins if i != data]
-        if (
-            ins.count(data) != 1
-            or any(o not in consts for o in others)
-            or (op in _ACT_OPS and op != "PRelu" and others)
-        ):
+        missing = [o for o in others if o not in consts]
+        if missing:
+            raise _err(
+                path,
+                f"{where}: input tensor {missing[0]!r} is neither an initializer nor the output "
+                "of a Constant node; every input but the data tensor must be a constant",
+                fld,
+            )
+        if ins.count(data) != 1 or (op in _ACT_OPS and op != "PRelu" and others):
             raise _err(path, f"{where}: every input but the data tensor must be a constant", fld)
         n = chain.dim()
         if op in _ACT_OPS:
             if op == "Identity":
                 pass
-            elif op == "PRelu":  # leaky relu with a tensor slope: one shared value only
-                slope = np.unique(consts[others[0]]) if others else np.array([])
-                if slope.size != 1:
-                    raise _err(path, f"{where}: only one slope shared by all units", fld)
-                chain.activate(LeakyRelu(float(slope[0])))
+            elif op == "PRelu":  # one shared slope (leaky relu) or one per unit
+                chain.activate(_prelu(consts[others[0]] if others else None, n, where, path, fld))
             elif op == "Sigmoid" and _is_silu(node, consumers, data):
                 mul = next(c for c in consumers[node.output[0]])
                 skip.add(list(g.node).index(mul))
@@ -277,6 +291,12 @@ def _convert(model, path: Path, fld: str | None) -> MLP:
             else:
                 chain.activate(_activation(node, attrs, path, fld))
             data = node.output[0]
+            continue
+        gelu = _match_gelu(node, consumers, consts, data) if op in ("Div", "Mul") else None
+        if gelu is not None:  # x * 0.5 * (1 + Erf(x / sqrt 2)): torch's Gelu below opset 20
+            chain.activate(Gelu())
+            skip.update(list(g.node).index(m) for m in gelu[1:])
+            data = gelu[-1].output[0]
             continue
         c = consts[others[0]] if others else None
         first = ins[0] == data
@@ -338,6 +358,99 @@ def _convert(model, path: Path, fld: str | None) -> MLP:
         )
     except SpecError as exc:
         raise _err(path, str(exc), fld) from None
+
+
+def _constant(attrs: dict[str, Any], where: str, path: Path, fld: str | None) -> np.ndarray:
+    """The float value of a ``Constant`` node (``value``, ``value_float`` or ``value_floats``)."""
+    if "value" in attrs:
+        arr = numpy_helper.to_array(attrs["value"])
+    elif "value_float" in attrs or "value_floats" in attrs:
+        arr = np.asarray(attrs.get("value_float", attrs.get("value_floats")))
+    else:
+        raise _err(
+            path,
+            f"{where}: only float constants ('value', 'value_float', 'value_floats') are supported",
+            fld,
+        )
+    if not np.issubdtype(arr.dtype, np.floating):
+        raise _err(path, f"{where}: constant of dtype {arr.dtype}; only floats", fld)
+    return arr.astype(np.float64)
+
+
+def _prelu(slope, n: int, where: str, path: Path, fld: str | None) -> Activation:
+    """The activation of a ``PRelu`` node on ``n`` units: :class:`LeakyRelu` when the slope
+    tensor holds one value, :class:`PRelu` when it holds one per unit (shape ``(n,)`` or
+    ``(1, n)``, as ``nn.PReLU(num_parameters=n)`` exports it)."""
+    if slope is None:
+        raise _err(path, f"{where}: the slope input is missing", fld)
+    flat = np.asarray(slope, dtype=np.float64).reshape(-1)
+    if flat.size and np.all(flat == flat[0]):
+        return LeakyRelu(float(flat[0]))
+    if slope.shape not in ((n,), (1, n)):
+        raise _err(
+            path,
+            f"{where}: slope tensor of shape {slope.shape}; one slope shared by all units or one "
+            f"per unit (shape ({n},)) is supported",
+            fld,
+        )
+    try:
+        return PRelu(tuple(flat))
+    except SpecError as exc:
+        raise _err(path, f"{where}: {exc}", fld) from None
+
+
+def _near(c: np.ndarray | None, value: float) -> bool:
+    """A scalar constant equal to ``value`` up to float32 rounding (the exporters' constants
+    are float32 numbers: ``sqrt 2`` is written as 1.4142135381698608)."""
+    if c is None or np.size(c) != 1:
+        return False
+    v = float(np.asarray(c).reshape(-1)[0])
+    return abs(v - value) <= _CONST_ULPS * float(np.finfo(np.float32).eps) * abs(value)
+
+
+def _match_gelu(node, consumers: dict[str, list], consts: dict[str, np.ndarray], x: str):
+    """The nodes of ``x * 0.5 * (1 + Erf(x / sqrt 2))`` starting at ``node`` (the division
+    ``x / sqrt 2`` or the product ``x * (1 / sqrt 2)``), as ``torch.onnx.export`` writes
+    ``nn.GELU()`` below opset 20: ``(x * (1 + erf)) * 0.5`` or ``x * ((1 + erf) * 0.5)``, in
+    either operand order. ``None`` unless every intermediate tensor has exactly one consumer
+    and ``x`` exactly two (this node and the product)."""
+
+    def const(n, name):  # the constant operand of a two-input node whose other input is name
+        ins = list(n.input)
+        if len(ins) != 2 or name not in ins:
+            return None
+        other = ins[1] if ins[0] == name else ins[0]
+        return consts.get(other)
+
+    def only(name):
+        c = consumers.get(name, [])
+        return c[0] if len(c) == 1 else None
+
+    if len(consumers.get(x, [])) != 2 or (node.op_type == "Div" and node.input[0] != x):
+        return None
+    scale = const(node, x)
+    if not (
+        (node.op_type == "Div" and _near(scale, math.sqrt(2.0)))
+        or (node.op_type == "Mul" and _near(scale, 1.0 / math.sqrt(2.0)))
+    ):
+        return None
+    erf = only(node.output[0])
+    if erf is None or erf.op_type != "Erf":
+        return None
+    add = only(erf.output[0])
+    if add is None or add.op_type != "Add" or not _near(const(add, erf.output[0]), 1.0):
+        return None
+    m1 = only(add.output[0])
+    if m1 is None or m1.op_type != "Mul":
+        return None
+    m2 = only(m1.output[0])
+    if m2 is None or m2.op_type != "Mul":
+        return None
+    if sorted(m1.input) == sorted([x, add.output[0]]):  # (x * (1 + erf)) * 0.5
+        ok = _near(const(m2, m1.output[0]), 0.5)
+    else:  # x * ((1 + erf) * 0.5)
+        ok = _near(const(m1, add.output[0]), 0.5) and sorted(m2.input) == sorted([x, m1.output[0]])
+    return (node, erf, add, m1, m2) if ok else None
 
 
 def _is_silu(node, consumers: dict[str, list], data: str) -> bool:
@@ -422,6 +535,10 @@ def write_onnx(mlp: MLP, path: str | Path, dtype: str = "float64") -> Path:
         if isinstance(act, Silu):
             nodes.append(helper.make_node("Sigmoid", [cur], [f"s{k}"], name=f"sigmoid{k}"))
             nodes.append(helper.make_node("Mul", [cur, f"s{k}"], [f"h{k}"], name=f"silu{k}"))
+        elif isinstance(act, PRelu):  # one slope per unit: a slope tensor of the layer width
+            slopes = np.asarray(act.slopes, dtype=np_t)
+            inits.append(numpy_helper.from_array(slopes, f"slope{k}"))
+            nodes.append(helper.make_node("PRelu", [cur, f"slope{k}"], [f"h{k}"], name=f"prelu{k}"))
         elif isinstance(act, LeakyRelu) and not isinstance(act, Relu) and not _f32(act.alpha):
             # an ONNX float attribute is float32: a float64 slope goes in as a tensor (exact)
             inits.append(numpy_helper.from_array(np.array([act.alpha], dtype=np_t), f"slope{k}"))

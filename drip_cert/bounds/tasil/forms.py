@@ -316,6 +316,58 @@ def form_held_out(
     return TasilForm("held_out", value, holds, eps >= 1.0 or not finite, note, eps, checks)
 
 
+def form_held_out_comparison(h0v, tau0: float, comparison_gain: float, delta: float) -> TasilForm:
+    """The held-out form through the comparison bound alone (docs/math/tasil.md 3.3 c with
+    Proposition 3.7), for a policy whose Jacobian is not Lipschitz (no lemma, no ``h_1``).
+
+    With the learned loop contracting on all of ``R^n``, every initial state's gap is at most
+    ``comparison_gain * h_0(xi)``, so ``P_xi[gap > comparison_gain * tau0] <=
+    P_xi[h_0 > tau0]``, which the sound Clopper-Pearson bound on the ``k`` held-out ``h_0`` above
+    ``tau0`` bounds at confidence ``1 - delta/2``; that must be ``<= delta/2``."""
+    h0v = np.asarray(h0v, dtype=np.float64)
+    n_val = h0v.size
+    k = int(np.sum(h0v > tau0))
+    eps = float(clopper_pearson_upper(k, n_val, alpha=delta / 2.0, sound=True))
+    level = Check(
+        "tasil.held_out.level",
+        eps <= delta / 2.0,
+        f"Clopper-Pearson P_xi[h0 > tau0] <= {eps:.4g} must be <= delta/2",
+        eps,
+        delta / 2.0,
+        delta / 2.0 - eps,
+        "docs/math/tasil.md 3.3 (c)",
+        How.SOUND,
+    )
+    value = up_closed_form(comparison_gain * tau0)
+    route = check_le(
+        "tasil.comparison",
+        value,
+        math.inf,
+        f"learned loop contracting on R^n: gap <= gamma_IL * tau0 = {comparison_gain:.6g} * "
+        f"{tau0:.6g} (no Jacobian-Lipschitz constant needed)",
+        "docs/math/tasil.md section 3.7",
+    )
+    finite = math.isfinite(value)
+    note = (
+        f"with prob >= 1 - delta/2 over {n_val} held-out trajectories ({k} exceed "
+        f"tau0={tau0:.4g}): P_xi[gap > {value:.4g}] <= {eps:.4g} (comparison bound of the "
+        f"learned loop; the lemma route is not applicable: the policy's Jacobian is not "
+        f"Lipschitz); joint level 1 - delta needs that <= delta/2"
+    )
+    need = min_trials_zero_failures(delta / 2.0, delta / 2.0)
+    if n_val < need:
+        note += f"; set [tasil] heldout >= {need} for this form to be able to pass"
+    return TasilForm(
+        "held_out",
+        value,
+        level.holds and finite,
+        eps >= 1.0 or not finite,
+        note,
+        eps,
+        (level, route),
+    )
+
+
 def form_threshold(obs, tau, c, n, gamma0, L, eta, R, delta, cont) -> TasilForm:
     """The threshold form (docs/math/tasil.md 3.3 a, 3.4): ``eps_0 + eps_1 <= delta/2`` at
     confidence ``1 - delta/2`` and the sharp lemma at ``tau + 2 alpha``, ``alpha_j = b_j / n``."""

@@ -12,14 +12,15 @@ from typing import Any
 import numpy as np
 
 from drip_cert._jax import jax, jnp
+from drip_cert.analysis.learned_loop import difference_jacobian_bound
 from drip_cert.analysis.policy_regularity import (
     difference_jacobian_lipschitz,
     jacobian_lipschitz,
 )
 from drip_cert.bounds.tasil._common import up_closed_form
 from drip_cert.bounds.tasil.certificate import TasilCertificate, tasil_certificate
-from drip_cert.bounds.tasil.forms import FORMS, TasilForm
-from drip_cert.bounds.tasil.trajectory import TrajectoryH, h_continuous
+from drip_cert.bounds.tasil.forms import FORMS, TasilForm, form_held_out_comparison
+from drip_cert.bounds.tasil.trajectory import TrajectoryH, h0_lipschitz, h_continuous
 from drip_cert.bounds.tasil.tube import TubeBound
 from drip_cert.learn.data import Demonstrations
 from drip_cert.learn.imitation import nominal_field
@@ -55,6 +56,18 @@ def trajectory_h(
         One :class:`~drip_cert.bounds.tasil.trajectory.TrajectoryH` per trajectory of ``demos``
         (:func:`~drip_cert.bounds.tasil.trajectory.h_continuous`), and how they were obtained.
     """
+    delta, jac, speeds, sound = _along(s, demos, speed_sound)
+    hs = [
+        h_continuous(demos.times, d, np.asarray(jac(jnp.asarray(traj))), v, L_Delta)
+        for traj, d, v in zip(demos.states, delta, speeds)
+    ]
+    return hs, How.SOUND if sound else How.ESTIMATE
+
+
+def _along(s: System, demos: Demonstrations, speed_sound: bool):
+    """``Delta`` at the grid points of every trajectory, the (jitted) Jacobian of ``Delta``, the
+    per-interval speed bounds (sound when ``speed_sound`` and the system is autonomous, see
+    :func:`trajectory_h`) and whether they are sound."""
     num = s.numeric
 
     def error(z):
@@ -67,16 +80,24 @@ def trajectory_h(
     # the expert's speed decays along a contracting AUTONOMOUS closed loop: no t in f nor in g
     autonomous = not any(s.t in e.free_symbols for e in (*s.f, *s.g))
     sound = speed_sound and autonomous
-    hs: list[TrajectoryH] = []
+    ds, speeds = [], []
     for traj in demos.states:
         X = jnp.asarray(traj)
-        d = np.asarray(delta(X))
-        j = np.asarray(jac(X))
+        ds.append(np.asarray(delta(X)))
         sp_ = np.asarray(speed_fn(X))
-        speed = sp_[:-1] if sound else np.maximum(sp_[:-1], sp_[1:])
-        hs.append(h_continuous(demos.times, d, j, speed, L_Delta))
-    how = How.SOUND if sound else How.ESTIMATE
-    return hs, how
+        speeds.append(sp_[:-1] if sound else np.maximum(sp_[:-1], sp_[1:]))
+    return ds, jac, speeds, sound
+
+
+def h0_by_lipschitz(
+    s: System, demos: Demonstrations, lip: float, speed_sound: bool
+) -> tuple[list[float], How]:
+    """Per-trajectory continuous-time ``h_0`` from a Lipschitz constant ``lip`` of ``Delta``
+    (:func:`~drip_cert.bounds.tasil.trajectory.h0_lipschitz`): sound under the conditions of
+    :func:`trajectory_h`, an estimate otherwise. No Jacobian-Lipschitz constant is needed."""
+    delta, _, speeds, sound = _along(s, demos, speed_sound)
+    h0 = [h0_lipschitz(demos.times, d, v, lip) for d, v in zip(delta, speeds)]
+    return h0, How.SOUND if sound else How.ESTIMATE
 
 
 def tasil_section(
@@ -181,21 +202,42 @@ def tasil_section(
     }
     qs: list[Quantity] = [gamma0, L_il, L_ex] + ([L_dir] if L_dir is not None and direct else [])
     if not math.isfinite(L_Delta.value):
-        return (
-            _not_lipschitz(
-                L_il if not math.isfinite(L_il.value) else L_ex,
-                train,
-                heldout,
-                gamma0,
-                R,
-                settings,
-                method,
-                comparison_gain,
-                uniform_h0,
-            ),
-            provenance,
-            tuple(qs) + tuple(q for q in (comparison_gain, uniform_h0) if q is not None),
+        # the comparison form from data (docs/math/tasil.md 3.7): sound h0 along the expert
+        # trajectories from a global Lipschitz constant of Delta (no Jacobian-Lipschitz one)
+        by_data = None
+        if comparison_gain is not None and heldout is not None:
+            lip = difference_jacobian_bound(s)
+            if lip is not None and math.isfinite(lip.value):
+                h0t, how_h = h0_by_lipschitz(s, train, lip.value, speed_sound)
+                h0v, _ = h0_by_lipschitz(s, heldout, lip.value, speed_sound)
+                h0q = Quantity.derive(
+                    "h0",
+                    max(h0t),
+                    inputs=[lip],
+                    method=how_h,
+                    source="docs/math/tasil.md (A3)",
+                    note="continuous-time sup along the expert trajectories from a Lipschitz "
+                    "constant of pi_IL - pi* (docs/math/tasil.md section 4)",
+                )
+                by_data = (h0t, h0v, lip, h0q)
+        cert = _not_lipschitz(
+            L_il if not math.isfinite(L_il.value) else L_ex,
+            train,
+            heldout,
+            gamma0,
+            R,
+            settings,
+            method,
+            comparison_gain,
+            uniform_h0,
+            None if by_data is None else (by_data[0], by_data[1]),
         )
+        extra: list[Quantity] = [q for q in (comparison_gain, uniform_h0) if q is not None]
+        if by_data is not None and cert.rho_form == "held_out":
+            provenance["comparison_gain"] = comparison_gain.to_dict()  # type: ignore[union-attr]
+            provenance["sup_D_Delta"] = by_data[2].to_dict()
+            extra = [q for q in (comparison_gain, by_data[2], by_data[3]) if q is not None]
+        return cert, provenance, tuple(qs) + tuple(extra)
     h_train, how_t = trajectory_h(s, train, L_Delta.value, speed_sound)
     train_h0, train_h1 = [h.h0 for h in h_train], [h.h1 for h in h_train]
     heldout_h0 = heldout_h1 = None
@@ -264,6 +306,7 @@ def _not_lipschitz(
     method: str,
     comparison_gain: Quantity | None = None,
     uniform_h0: Quantity | None = None,
+    h0_data: tuple[list[float], list[float]] | None = None,
 ) -> TasilCertificate:
     """The TaSIL certificate when a policy's Jacobian has no Lipschitz constant (DRIP Assumption
     PolicyRegularity (b) fails: a relu network, an ``Abs`` kink).
@@ -272,8 +315,10 @@ def _not_lipschitz(
     ``not applicable``, not as failed checks. The uniform form of docs/math/tasil.md 3.8 needs
     no ``L_Delta`` (only the learned loop's contraction on all of ``R^n`` and a sound
     ``sup_S ||pi_IL - pi*||``): when both are given it proceeds and gives ``rho``, with
-    probability 1. ``h_0``, ``h_1`` along trajectories are not computed (their sound
-    continuous-time sups need ``L_Delta``), so the comparison form (3.7) is not computed either.
+    probability 1. With ``h0_data`` (training and held-out ``h_0``, sound from a Lipschitz
+    constant of ``Delta``; ``h_1`` is not needed) the held-out form is computed through the
+    comparison bound alone (:func:`~drip_cert.bounds.tasil.forms.form_held_out_comparison`),
+    and ``rho`` is the smaller of the two forms that hold.
     """
     why = (
         "not applicable: the policy's Jacobian is not Lipschitz (the lemma route needs it): "
@@ -286,6 +331,16 @@ def _not_lipschitz(
         math.inf,
         why,
     )
+    h0 = tau0 = math.nan
+    if comparison_gain is not None and h0_data is not None:
+        h0t, h0v = h0_data
+        h0, tau0 = max(h0t), TAU_MARGIN * max(h0t)
+        held = form_held_out_comparison(h0v, tau0, comparison_gain.value, settings.delta)
+        forms[0] = held
+        # every given state's gap <= gamma_IL h0_i (section 3.7): the deterministic bound
+        gap, route = up_closed_form(comparison_gain.value * max(max(h0t), max(h0v))), ""
+        if held.holds and not held.vacuous:
+            rho, rho_form = held.value, "held_out"
     if comparison_gain is not None and uniform_h0 is not None:
         cg, u = comparison_gain.value, uniform_h0.value
         uni = up_closed_form(cg * u)
@@ -301,10 +356,12 @@ def _not_lipschitz(
                     "Lipschitz Jacobian)",
                 )
             )
-            rho, rho_form, gap, route = uni, "uniform", uni, ""
+            if uni < rho:
+                rho, rho_form = uni, "uniform"
+            gap, route = min(gap, uni), ""
     return TasilCertificate(
         method=method,
-        h0=math.nan,
+        h0=h0,
         h1=math.nan,
         gamma0=gamma0.value,
         L_Delta=math.inf,
@@ -317,7 +374,7 @@ def _not_lipschitz(
         delta=settings.delta,
         n=int(train.states.shape[0]),
         n_val=0 if heldout is None else int(heldout.states.shape[0]),
-        tau0=math.nan,
+        tau0=tau0,
         tau1=math.nan,
         forms=tuple(forms),
         vacuous_forms=tuple(f.name for f in forms if f.vacuous or not f.holds),

@@ -19,7 +19,7 @@ from drip_cert.errors import SpecError
 from drip_cert.numerics.rounding import norm2_up_np, spectral_norm_upper
 from drip_cert.provenance import How
 
-__all__ = ["TrajectoryH", "h_continuous", "h_discrete", "h_from_functions"]
+__all__ = ["TrajectoryH", "h0_lipschitz", "h_continuous", "h_discrete", "h_from_functions"]
 
 # relative allowance when checking grid values against the claimed Lipschitz-in-time rate
 _CONSISTENCY_RTOL = 1e-9
@@ -176,6 +176,26 @@ def h_continuous(t, delta, jac, speed, L_Delta: float) -> TrajectoryH:
         True,
         How.SOUND,
     )
+
+
+def h0_lipschitz(t, delta, speed, lip: float) -> float:
+    """Sound continuous-time ``h_0 = sup_t ||Delta(x*_t)||`` along an expert trajectory from a
+    Lipschitz constant ``lip`` of ``Delta`` alone (docs/math/tasil.md section 4 with
+    ``|d/dt ||Delta(x*_t)||| <= lip ||x*_dot||``): no Jacobian-Lipschitz constant, so it serves a
+    piecewise-linear (relu) policy, whose Clarke Jacobians are bounded by ``lip``.
+
+    ``t``: increasing grid ``(N,)``; ``delta``: ``Delta`` at the grid points ``(N, m)``;
+    ``speed``: ``sup ||x*_dot||`` per interval ``(N-1,)`` (or a scalar).
+    """
+    d = np.linalg.norm(np.asarray(delta, dtype=np.float64).reshape(len(t), -1), axis=1)
+    t = np.asarray(t, dtype=np.float64)
+    if t.size < 2 or np.any(np.diff(t) <= 0) or not np.all(np.isfinite(t)):
+        raise SpecError("t must be a strictly increasing finite grid of >= 2 points", field="t")
+    L = positive("lip", lip, allow_zero=True)
+    v = np.broadcast_to(np.asarray(speed, dtype=np.float64), (t.size - 1,))
+    if not np.all(np.isfinite(v)) or np.any(v < 0):
+        raise SpecError(f"speed must be finite and >= 0, got {speed!r}", field="speed")
+    return float(np.max(_sound_sup(t, d, L * v, "h0 (policy error norm)")))
 
 
 def h_from_functions(
