@@ -65,7 +65,7 @@ def cmd_certify(args: argparse.Namespace) -> int:
     cert = certify(spec, progress=not (args.json or args.quiet))
     accepted = cert.certified or (args.allow_estimates and cert.verdict.value == "conditional")
     if args.figure:
-        from drip_cert.figures_certificate import certificate_figure  # matplotlib: off start-up
+        from drip_cert.figures_certificate import certificate_figure  # numpy: off start-up
 
         certificate_figure(
             cert.to_dict(),
