@@ -25,7 +25,7 @@ Route "perturbation-of-expert" (the issue's ``lambda_IL >= lambda* - ||g|| sup |
     global whenever the expert's rate ``lambda*`` is (blocks shared by ``pi_IL`` and ``pi*``
     cancel in ``Delta`` before its coefficients are read).
 
-Route "slope-lmi" (the loop itself, neuron by neuron; docs/math/contraction.md section 10).
+Route "slope-lmi" (the loop itself, neuron by neuron; docs/math/contraction.md section 11).
     Every neuron of every block is slope-restricted; the S-procedure LMI of
     :mod:`drip_cert.analysis.slope_lmi` with ``P = I`` proves ``mu_2(J(x)) <= -lambda`` for every
     x, verified in Arb. When the trace condition rules every such LMI out, its number is the
@@ -303,7 +303,7 @@ def slope_lmi_rate_global(
         method=How.SOUND,
         source="DRIP Assumption 2 / L1-DRAC Assumption 2, Euclidean log norm",
         note="slope-lmi on all x, all t: S-procedure LMI over every neuron's slope range, P = I, "
-        "verified in Arb (docs/math/contraction.md section 10)",
+        "verified in Arb (docs/math/contraction.md section 11)",
         scope=GLOBAL,
     )
     note = (

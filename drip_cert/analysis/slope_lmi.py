@@ -1,19 +1,19 @@
 """Contraction of a closed loop affine in MLP blocks by a slope-restricted LMI (the LipSDP idea
-applied to the closed loop's Jacobian), verified in Arb. docs/math/contraction.md section 10.
+applied to the closed loop's Jacobian), verified in Arb. docs/math/contraction.md section 11.
 
 Setting. ``F(x) = A x + c + sum_k C_k h_k(x)`` (constant ``A, c, C_k``, :func:`~drip_cert.
 analysis.closed_loop.affine_in_blocks`), every ``h_k`` an MLP ``z_{l+1} = s_l(W_l z_l + b_l)``.
 For two states ``x, y`` write ``v = x - y``, ``a`` for the stacked increments of the
 pre-activations of every neuron (hidden neurons, and output neurons when the output activation is
 not the identity) and ``u`` for the increments of their outputs. Then ``a = E xi`` and
-``F(x) - F(y) = G xi`` with ``xi = (v, u)`` and constant ``E``, ``G`` (10.1), and every neuron
-satisfies the incremental quadratic constraint (10.2)
+``F(x) - F(y) = G xi`` with ``xi = (v, u)`` and constant ``E``, ``G`` (11.1), and every neuron
+satisfies the incremental quadratic constraint (11.2)
 
 ``q_i(xi) = (u_i - alpha_i a_i) (beta_i a_i - u_i) >= 0``,
 
 ``[alpha_i, beta_i]`` the activation's slope range (for a piecewise-C1 activation the secant
 slope ``u_i / a_i`` is an average of its a.e. derivative, hence in the range). With multipliers
-``t_i >= 0`` (S-procedure), the LMI (10.3)
+``t_i >= 0`` (S-procedure), the LMI (11.3)
 
 ``M(P, t, lambda) = Ev^T P G + G^T P Ev + 2 lambda Ev^T P Ev + sum_i t_i Q_i <= 0``
 
@@ -92,7 +92,7 @@ _METRIC_BISECTIONS = 12
 
 @dataclass(frozen=True)
 class SlopeStructure:
-    """The increments of a loop affine in MLP blocks (module docstring, (10.1)).
+    """The increments of a loop affine in MLP blocks (module docstring, (11.1)).
 
     ``xi = (v, u)`` with ``v`` in ``R^n`` and ``u`` the ``N`` neuron output increments;
     ``a = E xi`` (``(N, n + N)``) the pre-activation increments; ``F(x) - F(y) = G xi``, whose
@@ -227,7 +227,7 @@ class TraceObstruction:
     slopes: np.ndarray
 
     def blocks(self, rate: float = 0.0) -> bool:
-        """Whether no LMI of the form (10.3) can prove the rate ``rate``."""
+        """Whether no LMI of the form (11.3) can prove the rate ``rate``."""
         return self.mean_eigenvalue > -rate or self.abscissa > -rate
 
     def reason(self) -> str:
@@ -297,7 +297,7 @@ def _neuron_terms(st: SlopeStructure, t: np.ndarray) -> np.ndarray:
 
 
 def lmi_matrix(st: SlopeStructure, P: np.ndarray, t: np.ndarray, lam: float) -> np.ndarray:
-    """The float ``M(P, t, lam)`` of (10.3) (symmetrised; the certificate uses the Arb one)."""
+    """The float ``M(P, t, lam)`` of (11.3) (symmetrised; the certificate uses the Arb one)."""
     n = st.n
     M = _neuron_terms(st, t)
     PG = P @ st.G()
@@ -334,7 +334,7 @@ def _arb_ball(M: np.ndarray, rad: np.ndarray | None = None) -> arb_mat:
 
 
 def verify_slope_lmi(st: SlopeStructure, P: np.ndarray, t: np.ndarray, lam: float) -> bool:
-    """Rigorously check ``P > 0``, ``t >= 0`` and ``M(P, t, lam) < 0`` (10.3).
+    """Rigorously check ``P > 0``, ``t >= 0`` and ``M(P, t, lam) < 0`` (11.3).
 
     ``M`` is assembled in Arb: ``A`` and ``C_k`` as balls of their conversion radius
     (:data:`~drip_cert.analysis.closed_loop.CONVERSION_ULPS` spacings), the weights, slopes,
@@ -487,7 +487,7 @@ def slope_lmi_rate(
     solver: str = "auto",
     obstruct: bool = True,
 ) -> SlopeLMIResult:
-    """The largest verified rate of the slope-restricted LMI (10.3) (module docstring).
+    """The largest verified rate of the slope-restricted LMI (11.3) (module docstring).
 
     ``metric=False``: ``P = I`` (a ``mu_2`` rate, what DRIP and L1-DRAC use); ``metric=True``: a
     constant metric ``I <= P <= kappa I`` found by bisection. The trace condition is checked
@@ -574,7 +574,7 @@ def box_slope_bnb(
     max_boxes: int = DEFAULT_BOX_BUDGET,
     max_dim: int = DEFAULT_MAX_DIM,
 ) -> BoxSlopeResult:
-    """``max mu_2(J(x))`` over ``box`` by the slope-restricted LMI per sub-box (section 10.4).
+    """``max mu_2(J(x))`` over ``box`` by the slope-restricted LMI per sub-box (section 11.4).
 
     Each sub-box gets its neurons' slope ranges from interval bounds of their pre-activations
     there (:func:`slope_structure` with the box) and the verified LMI rate ``lambda_B`` with
