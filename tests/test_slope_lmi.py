@@ -222,3 +222,29 @@ def test_global_route_gives_the_obstruction_as_its_reason(system):
     g = best_global_rate(s, None, reasons)
     assert g is None or not g.result.holds
     assert len(reasons) == 1 and "slope-lmi route" in reasons[0] and "tr J(s)/n" in reasons[0]
+
+
+def _ctx(name: str):
+    from proofs_check._core import Context, make_rng
+
+    return Context(rng=make_rng(0, name), quick=True, seed=0)
+
+
+def test_proofs_check_incremental_contraction_holds_and_fails_on_narrow_slopes():
+    from proofs_check import Verdict
+    from proofs_check.slope_lmi import check_incremental_contraction
+
+    name = "slope_lmi.incremental_contraction"
+    assert check_incremental_contraction(_ctx(name)).verdict is Verdict.PASS
+    # half of every slope range is a wrong constraint (11.2): pairs of states violate the rate
+    bad = check_incremental_contraction(_ctx(name), slope_scale=0.5)
+    assert bad.verdict is Verdict.FAIL and bad.residual > 0
+
+
+def test_proofs_check_trace_condition_holds_and_fails_without_the_division_by_n():
+    from proofs_check import Verdict
+    from proofs_check.slope_lmi import check_trace_condition
+
+    name = "slope_lmi.trace_condition"
+    assert check_trace_condition(_ctx(name)).verdict is Verdict.PASS
+    assert check_trace_condition(_ctx(name), divisor=1.0).verdict is Verdict.FAIL
