@@ -2,8 +2,8 @@
 
 L1-DRAC needs the nominal closed loop ``F(x) = f(x) + g pi_IL(x)`` to contract on all of ``R^n``
 (the true SDE leaves every bounded set with positive probability), so a rate proved on a box does
-not serve it. For a neural policy a box branch and bound cannot reach infinity; two routes here do,
-whenever the expressions are affine in MLP blocks (docs/math/contraction.md section 9):
+not serve it. For a neural policy a box branch and bound cannot reach infinity; three routes here
+do, whenever the expressions are affine in MLP blocks (docs/math/contraction.md sections 9, 11):
 
 Route "lipschitz-affine-mlp" (the loop itself).
     If ``F(x) = A x + c + sum_k C_k h_k(x)`` with constant ``A, c, C_k`` and MLPs ``h_k``, then
