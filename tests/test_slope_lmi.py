@@ -248,3 +248,63 @@ def test_proofs_check_trace_condition_holds_and_fails_without_the_division_by_n(
     name = "slope_lmi.trace_condition"
     assert check_trace_condition(_ctx(name)).verdict is Verdict.PASS
     assert check_trace_condition(_ctx(name), divisor=1.0).verdict is Verdict.FAIL
+
+
+SIGNED_NET_SPEC = """
+[system]
+name = "signed-net"
+states = ["x1", "x2"]
+inputs = ["u1", "u2"]
+horizon = 2.0
+
+[blocks.pi_il]
+kind = "mlp"
+weights = "pi.npz"
+inputs = 2
+outputs = 2
+
+[dynamics]
+f = ["-x1 + 0.5*x2", "-0.5*x1 - x2"]
+g = [["0.5", "0"], ["0", "0.5"]]
+
+[policy]
+expert = ["-x1", "-x2"]
+learned = ["pi_il(x)[0]", "pi_il(x)[1]"]
+
+[uncertainty]
+drift = ["0.05*sin(x1)", "0.05*cos(x2)"]
+diffusion = [["0.02", "0"], ["0", "0.02"]]
+
+[initial]
+support = [[-1.0, 1.0], [-1.0, 1.0]]
+
+[contraction]
+max_boxes = 200
+metric = "euclidean"
+
+[l1drac]
+p = 2
+lambda_s = 10.0
+delta = 0.05
+"""
+
+
+@pytest.mark.slow
+def test_certify_proves_a_plain_mlp_loop_globally_and_certifies_l1drac(tmp_path, capsys):
+    # pi = -W^T tanh(W x) with ||W||^2 ~ 30: the Lipschitz routes fail, the box route proves only
+    # a box (before this route: verdict not_certified); the slope LMI proves rate 1 on all x
+    import json
+
+    from drip_cert.model.mlp import save_mlp
+    from tests.helpers import run_cli
+
+    W = 2.0 * np.random.default_rng(4).standard_normal((6, 2))
+    save_mlp(MLP(weights=(W, -W.T), biases=(np.zeros(6), np.zeros(2))), tmp_path / "pi.npz")
+    spec = write_spec(tmp_path, SIGNED_NET_SPEC)
+    code, out, _ = run_cli(capsys, "certify", str(spec), "--json")
+    cert = json.loads(out)
+    learned = cert["contraction"]["learned"]
+    assert learned["method"] == "slope-lmi" and learned["scope"]["box"] is None
+    assert learned["rate"] == pytest.approx(1.0, abs=SOLVER_TOL)
+    assert all(p["verdict"] == "certified" for p in cert["parts"].values())
+    assert code == 0 and cert["verdict"] == "certified"
