@@ -74,9 +74,10 @@ __all__ = [
     "verify_slope_lmi",
 ]
 
-#: above this LMI size (states + neurons) no SDP is attempted (Clarabel's dense PSD block costs
-#: ~d^6; SCS takes tens of seconds at d ~ 200, drip_cert/analysis/mlp/lipsdp.py)
-DEFAULT_MAX_DIM = 200
+#: above this LMI size (states + neurons) no SDP is attempted: SCS took 3 s at d = 66, 49-95 s at
+#: d = 148 and did not converge in its iteration cap (409 s) on another d = 148 instance (2 loaded
+#: cores); the trace condition is checked at any size
+DEFAULT_MAX_DIM = 100
 #: LMI size up to which Clarabel (interior point, most accurate) is used; SCS (first order) above.
 #: Measured (2 loaded cores, P = I): d = 34: Clarabel 7.4 s, SCS 1.0 s; d = 66: 33 s vs 3.3 s, the
 #: same verified rate to 2e-5 (the Schur-complement rate repairs SCS's lower accuracy)
@@ -515,7 +516,14 @@ def slope_lmi_rate(
     if obstruct and obs.blocks(0.0):
         return out(None, eye, none, "obstructed", obs.reason())
     if st.dim > max_dim:
-        return out(None, eye, none, "too_large", f"LMI size {st.dim} exceeds max_dim = {max_dim}")
+        return out(
+            None,
+            eye,
+            none,
+            "too_large",
+            f"LMI size {st.dim} exceeds max_dim = {max_dim} (no SDP solved; the trace condition "
+            f"tr J(s)/n <= {obs.mean_eigenvalue:.4g} does not rule an LMI out)",
+        )
     if solver == "auto":
         solver = "CLARABEL" if st.dim <= _CLARABEL_MAX_DIM else "SCS"
     P, t, status = _solve(st, metric, kappa, solver)
