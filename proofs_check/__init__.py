@@ -27,6 +27,7 @@ MODULES = (
     "proofs_check.invariance",
     "proofs_check.sde_moments",
     "proofs_check.coordinates",
+    "proofs_check.slope_lmi",
     "proofs_check.implementation",
 )
 

@@ -2,8 +2,8 @@
 
 L1-DRAC needs the nominal closed loop ``F(x) = f(x) + g pi_IL(x)`` to contract on all of ``R^n``
 (the true SDE leaves every bounded set with positive probability), so a rate proved on a box does
-not serve it. For a neural policy a box branch and bound cannot reach infinity; two routes here do,
-whenever the expressions are affine in MLP blocks (docs/math/contraction.md section 9):
+not serve it. For a neural policy a box branch and bound cannot reach infinity; three routes here
+do, whenever the expressions are affine in MLP blocks (docs/math/contraction.md sections 9, 11):
 
 Route "lipschitz-affine-mlp" (the loop itself).
     If ``F(x) = A x + c + sum_k C_k h_k(x)`` with constant ``A, c, C_k`` and MLPs ``h_k``, then
@@ -24,6 +24,12 @@ Route "perturbation-of-expert" (the issue's ``lambda_IL >= lambda* - ||g|| sup |
 
     global whenever the expert's rate ``lambda*`` is (blocks shared by ``pi_IL`` and ``pi*``
     cancel in ``Delta`` before its coefficients are read).
+
+Route "slope-lmi" (the loop itself, neuron by neuron; docs/math/contraction.md section 11).
+    Every neuron of every block is slope-restricted; the S-procedure LMI of
+    :mod:`drip_cert.analysis.slope_lmi` with ``P = I`` proves ``mu_2(J(x)) <= -lambda`` for every
+    x, verified in Arb. When the trace condition rules every such LMI out, its number is the
+    route's reason.
 
 Floating point: the coefficients are read from sympy with ``float()`` (within
 :data:`~drip_cert.analysis.closed_loop.CONVERSION_ULPS` spacings of the true ones); ``mu_2(A)``
@@ -54,6 +60,7 @@ from drip_cert.analysis.mlp import (
     lipschitz_bound,
 )
 from drip_cert.analysis.policy_regularity import difference_jacobian_lipschitz
+from drip_cert.analysis.slope_lmi import slope_lmi_rate, slope_structure
 from drip_cert.model.system import System
 from drip_cert.numerics.bnb import maximize
 from drip_cert.numerics.rounding import (
@@ -77,6 +84,7 @@ __all__ = [
     "perturbation_rate",
     "best_global_rate",
     "difference_jacobian_bound",
+    "slope_lmi_rate_global",
     "sup_policy_difference",
 ]
 
@@ -278,12 +286,56 @@ def difference_jacobian_bound(s: System, memo: LipMemo | None = None) -> Quantit
     )
 
 
-def best_global_rate(s: System, expert_rate: Quantity | None) -> GlobalRate | None:
-    """The larger proved rate of the two routes (``None`` when neither applies)."""
+def slope_lmi_rate_global(
+    s: System, which: str = "learned", reasons: list[str] | None = None
+) -> GlobalRate | None:
+    """Route "slope-lmi": ``mu_2(J(x)) <= -lambda`` for all x from the slope-restricted LMI
+    (:func:`~drip_cert.analysis.slope_lmi.slope_lmi_rate` with ``P = I``), verified in Arb.
+
+    ``None`` when the loop is not affine in MLP blocks applied to the state or no verified rate
+    exists; then the reason (the trace condition's number, the solver status, the LMI size) is
+    appended to ``reasons``.
+    """
+    t0 = time.perf_counter()
+    if which == "learned" and s.learned is None:
+        return None
+    dec = affine_in_blocks(s.closed_loop(which), s)
+    if dec is None or not dec.C or any(s.blocks[b].mlp is None for b in dec.C):
+        return None
+    mlps = {b: s.blocks[b].mlp for b in dec.C}
+    st = slope_structure(dec, mlps)  # type: ignore[arg-type]
+    res = slope_lmi_rate(st)
+    if res.rate is None:
+        if reasons is not None:
+            reasons.append(f"slope-lmi route: {res.reason}")
+        return None
+    rate = Quantity.derive(
+        "lambda",
+        res.rate,
+        method=How.SOUND,
+        source="DRIP Assumption 2 / L1-DRAC Assumption 2, Euclidean log norm",
+        note="slope-lmi on all x, all t: S-procedure LMI over every neuron's slope range, P = I, "
+        "verified in Arb (docs/math/contraction.md section 11)",
+        scope=GLOBAL,
+    )
+    note = (
+        f"{st.N} neurons, LMI size {st.dim}, {res.reason}; trace condition tr J(s)/n <= "
+        f"{res.obstruction.mean_eigenvalue:.4g} at the worst slope vertex found"
+    )
+    return GlobalRate(_result(rate, "slope-lmi", note, t0), rate, ())
+
+
+def best_global_rate(
+    s: System, expert_rate: Quantity | None, reasons: list[str] | None = None
+) -> GlobalRate | None:
+    """The largest proved rate of the three routes (``None`` when none applies); ``reasons``
+    collects why the slope-lmi route proved nothing, when it did not."""
     memo: LipMemo = {}
     cands = [lipschitz_rate(s, "learned", memo)]
     if expert_rate is not None:
         cands.append(perturbation_rate(s, expert_rate, memo))
+    if not any(c is not None and c.result.holds for c in cands):
+        cands.append(slope_lmi_rate_global(s, "learned", reasons))
     ok = [c for c in cands if c is not None and math.isfinite(c.rate.value)]
     return max(ok, key=lambda c: c.rate.value) if ok else None
 

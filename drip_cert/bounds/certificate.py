@@ -981,7 +981,9 @@ def _learned_contraction(
     """The learned loop's rate: first the global routes for loops affine in MLP blocks
     (:mod:`drip_cert.analysis.learned_loop`; L1-DRAC needs all of R^n), then, when they prove
     nothing, the configured route on the contraction region (a box result)."""
-    g = best_global_rate(s, lam_ex)
+    reasons: list[str] = []
+    g = best_global_rate(s, lam_ex, reasons)
+    notes.extend(f"learned closed loop: {r}" for r in reasons)
     if g is not None and g.result.holds and g.result.how != How.ESTIMATE:
         notes.append(
             f"learned closed loop: rate {g.result.rate:.6g} proved on all x by the "
