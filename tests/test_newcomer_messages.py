@@ -17,7 +17,9 @@ from tests.helpers import run_cli, two_state_spec, write_spec
 
 BASE = two_state_spec()
 #: a spec whose learned policy calls a network block ``net`` (declared below when needed)
-LEARNED = BASE.replace('expert = ["-x1 - 2*x2"]', 'expert = ["-x1 - 2*x2"]\nlearned = ["net(x)[0]"]')
+LEARNED = BASE.replace(
+    'expert = ["-x1 - 2*x2"]', 'expert = ["-x1 - 2*x2"]\nlearned = ["net(x)[0]"]'
+)
 
 
 def _fails_with(capsys, argv: list[str], *fragments: str) -> str:

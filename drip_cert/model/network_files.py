@@ -7,10 +7,10 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from drip_cert.errors import SpecError
-from drip_cert.numerics.user_files import input_file
 from drip_cert.model.mlp import MLP, load_mlp
 from drip_cert.model.onnx_io import read_onnx
 from drip_cert.model.safetensors_io import read_safetensors
+from drip_cert.numerics.user_files import input_file
 
 __all__ = ["NETWORK_FORMATS", "load_network"]
 

@@ -304,7 +304,9 @@ def spec_from_dict(doc: Mapping[str, Any], path: Path | None = None) -> Spec:
     vec_name = "x" if "x" not in state_names else None
 
     raw_inputs = sysd.get("inputs")
-    input_names = [u for u in raw_inputs if isinstance(u, str)] if isinstance(raw_inputs, list) else []
+    input_names = (
+        [u for u in raw_inputs if isinstance(u, str)] if isinstance(raw_inputs, list) else []
+    )
     input_hint = (
         "it names an input; the dynamics are f + g u: write the input's coefficients into its "
         "column of g, not into an expression"
@@ -505,7 +507,7 @@ def _reserved_clash(kind: str, name: str, tname: str) -> str:
     if name == tname:
         what = "the time variable ([system] time, default 't')"
         fix = (
-            f"rename the {kind}, or name the time otherwise with [system] time = \"tau\""
+            f'rename the {kind}, or name the time otherwise with [system] time = "tau"'
             if kind == "state"
             else f"rename the {kind}"
         )
