@@ -324,7 +324,6 @@ class _Parser:
             raise self.fail(f"{name}() takes at least two arguments")
         return FUNCTIONS[name](*args)
 
-
     def _undeclared_block(self, name: str) -> str:
         """The message of a call of ``name``, which is neither a function nor a block."""
         declared = ", ".join(sorted(self.blocks)) or "none"
