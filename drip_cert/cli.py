@@ -28,6 +28,7 @@ from typing import Any
 # `drip-cert --help` and a mistyped argument cost a fraction of a second (tests/test_layers.py).
 from drip_cert.diff import DEFAULT_RTOL, diff_files, diff_text
 from drip_cert.errors import AssumptionViolation, DripCertError, FingerprintError, SpecError
+from drip_cert.provenance import ValidationStatus
 from drip_cert.sim.backend import Backend
 
 
@@ -160,7 +161,7 @@ def cmd_validate(args: argparse.Namespace) -> int:
             progress=_progress(args),
             accept_unfingerprinted=args.accept_unfingerprinted,
         )
-        if report.result.data.fingerprint is None:  # accepted by the flag: say so on stderr
+        if report.unfingerprinted_data:  # accepted by the flag: say so on stderr
             print(
                 f"drip-cert: warning: {args.data}: the data carry no fingerprint; accepted "
                 "unverified by --accept-unfingerprinted",
@@ -184,7 +185,7 @@ def cmd_validate(args: argparse.Namespace) -> int:
     else:
         print(validation_text(report.to_dict()))
     # exit 0 only when a finite bound was checked and none is violated (not "nothing checked")
-    return 0 if report.status == "holds" else 1
+    return 0 if report.status == ValidationStatus.HOLDS else 1
 
 
 def cmd_diff(args: argparse.Namespace) -> int:

@@ -558,7 +558,7 @@ def validate_spec(
     rep = run.validations[0].with_notes_before(run.notes)
     if out is not None:
         out = Path(out)
-        rep.result.save(out / "simulation")
+        rep.simulation.save(out / "simulation")
         atomic_write_json(out / "validation.json", rep.to_dict())
         write_validation_outputs(rep, out)  # validation.md and validation.png beside the JSON
     return rep
@@ -684,7 +684,7 @@ def reproduce(
     atomic_write_text(out / "certificate.md", certificate_markdown(cert))
     paper, ours = run.validations
     runs = {"paper": paper, "ours": ours}
-    res = ours.result
+    res = ours.simulation
     res.save(out / "simulation")
     claims = qualitative_claims(res)
     fig_paths = reproduce_figure(

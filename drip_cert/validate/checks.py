@@ -43,16 +43,34 @@ import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from types import MappingProxyType
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 
 from drip_cert.numerics import stats as _stats
+from drip_cert.provenance import ValidationStatus
 
-HOLDS = "holds"  #: a finite bound was compared and not violated at the stated confidence
-VIOLATED = "violated"  #: the one-sided lower confidence bound exceeds the bound
-NOT_CHECKED = "not_checked"  #: nothing was compared (the check's ``reason`` says why)
-NOTHING_CHECKED = "nothing_checked"  #: report status: no check holds and none is violated
+# the statuses (drip_cert.provenance.ValidationStatus, str-valued: the JSON is unchanged)
+HOLDS = ValidationStatus.HOLDS
+VIOLATED = ValidationStatus.VIOLATED
+NOT_CHECKED = ValidationStatus.NOT_CHECKED
+NOTHING_CHECKED = ValidationStatus.NOTHING_CHECKED
+
+
+class GapEvidence(Protocol):
+    """What a validation reads of its evidence: a simulation
+    (:class:`~drip_cert.sim.result.SimResult`) or recorded data
+    (:class:`~drip_cert.validate.data.DataResult`) alike."""
+
+    @property
+    def n_paths_done(self) -> int: ...
+
+    @property
+    def times(self) -> np.ndarray: ...
+
+    def gap(self, name: str) -> _stats.GapStats: ...
+
+    def to_dict(self) -> dict[str, Any]: ...
 
 
 def _bound_problem(bound: float | None, what: str = "bound") -> str | None:
@@ -113,7 +131,7 @@ class EmpiricalCheck:
     confidence_low: float | None
     confidence_high: float | None
     level: float | None
-    status: str
+    status: ValidationStatus
     reason: str | None
     note: str
     extra: Mapping[str, Any] = field(default_factory=lambda: MappingProxyType({}))
@@ -546,7 +564,7 @@ def check_mean(
     )
 
 
-def overall_status(checks: Sequence[EmpiricalCheck]) -> str:
+def overall_status(checks: Sequence[EmpiricalCheck]) -> ValidationStatus:
     """``violated`` if any check is, else ``holds`` if at least one is, else ``nothing_checked``."""
     statuses = [c.status for c in checks]
     if VIOLATED in statuses:
