@@ -83,6 +83,12 @@ def cmd_certify(args: argparse.Namespace) -> int:
                 "\nNOTE: verdict is CONDITIONAL; exit status 0 only because --allow-estimates "
                 "was given (the certificate rests on the items listed above)."
             )
+    if args.export_l1_constants is not None:
+        from drip_cert.numerics.atomic_io import atomic_write_text  # numpy: off the start-up path
+        from drip_cert.report import l1_constants_toml  # numpy: off the start-up path
+
+        text = l1_constants_toml(cert.to_dict(), spec.settings.l1drac, source=str(args.spec))
+        atomic_write_text(Path(args.export_l1_constants), text)
     return 0 if accepted else 1
 
 
@@ -239,7 +245,20 @@ def build_parser() -> argparse.ArgumentParser:
         action="store_true",
         help="exit 0 for a conditional verdict too (one resting on estimates or unproved regions)",
     )
-    q.set_defaults(func=cmd_certify, files=[("spec", IN, "specification file")])
+    q.add_argument(
+        "--export-l1-constants",
+        default=None,
+        metavar="FILE",
+        help="write the L1-DRAC constants and design inputs as a complete `drip-cert design-l1` "
+        "file (.toml), to explore T_s and rho without certifying again",
+    )
+    q.set_defaults(
+        func=cmd_certify,
+        files=[
+            ("spec", IN, "specification file"),
+            ("export_l1_constants", OUT_FILE, "--export-l1-constants file"),
+        ],
+    )
 
     q = sub.add_parser("design-l1", help="L1-DRAC parameter feasibility from a constants file")
     q.add_argument(
@@ -534,7 +553,7 @@ def _nonneg_int(text: str) -> int:
 
 # ---------------------------------------------------------------------------- files and errors
 #: roles of the files a command names (``set_defaults(files=[(dest, role, what), ...])``)
-IN, OUT_DIR, FIGURE = "input file", "output directory", "figure file"
+IN, OUT_DIR, FIGURE, OUT_FILE = "input file", "output directory", "figure file", "output file"
 
 DEBUG_HELP = "on an error, also print the traceback (attach it to a bug report)"
 QUIET_HELP = (
@@ -571,6 +590,8 @@ def check_files(args: argparse.Namespace) -> None:
             input_file(value, what)
         elif role == OUT_DIR:
             output_dir(value, what)
+        elif role == OUT_FILE:
+            output_file(value, what)
         else:
             _check_figure(output_file(value, what), what)
 

@@ -495,9 +495,12 @@ def _training_failures(
         if not math.isfinite(mean):
             out.append("the learned closed loop diverges from some held-out initial states")
         elif mean > thr:
+            n = tp.settings.trajectories
             out.append(
                 f"held-out gap mean {mean:.4g} exceeds the threshold {thr:.4g}"
                 + ("" if given is not None else f" ({GAP_THRESHOLD_NOTE})")
+                + f": train on more demonstrations (n = {n} now: --trajectories {2 * n}) or "
+                f"for longer (--steps, now {tp.settings.steps})"
             )
     return out
 

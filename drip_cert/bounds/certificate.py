@@ -631,6 +631,8 @@ def _summary(c: Certificate) -> dict[str, Any]:
         "rho_tasil_x": json_float(c.rho_tasil) if c.rho_tasil is not None else None,
         "rho_l1_x": json_float(c.rho_l1) if c.rho_l1 is not None else None,
         "factor_to_x": None if c.coordinates is None else c.coordinates.to_x,
+        "failing": sum(1 for a in c.assumptions if not a.holds),
+        "verdict_reasons": list(c.verdict_reasons),
     }
 
 

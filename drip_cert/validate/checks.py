@@ -73,10 +73,25 @@ class GapEvidence(Protocol):
     def to_dict(self) -> dict[str, Any]: ...
 
 
+#: what to change in the spec for a number the certificate lacks (the reason of a not_checked)
+_HOW_TO_CERTIFY = {
+    "kappa": "set [l1drac] delta (the tail probability kappa is certified for, L1-DRAC (130a))",
+    "delta_L1": "set [l1drac] delta (a probability in (0, 1))",
+    "delta_TaSIL": "set [tasil] delta (a probability in (0, 1))",
+    "rho_TaSIL": "give the spec a learned policy ([policy] learned; drip-cert train writes one)",
+}
+
+
+def _not_certified(what: str) -> str:
+    """``no kappa certified: set [l1drac] delta ...`` (the fix, where one is known)."""
+    fix = _HOW_TO_CERTIFY.get(what)
+    return f"no {what} certified" + (f": {fix}" if fix else "")
+
+
 def _bound_problem(bound: float | None, what: str = "bound") -> str | None:
     """Why ``bound`` cannot be compared (``None`` when it can)."""
     if bound is None:
-        return f"no {what} certified"
+        return _not_certified(what)
     if math.isnan(bound):
         return f"{what} is NaN"
     if math.isinf(bound):
@@ -86,7 +101,7 @@ def _bound_problem(bound: float | None, what: str = "bound") -> str | None:
 
 def _delta_problem(delta: float | None, what: str = "delta") -> str | None:
     if delta is None:
-        return f"no {what} certified"
+        return _not_certified(what)
     if not 0.0 < delta < 1.0:
         return f"{what} = {delta!r} is not a probability in (0, 1): the claim is vacuous"
     return None
