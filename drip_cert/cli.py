@@ -129,6 +129,7 @@ def cmd_train(args: argparse.Namespace) -> int:
         compare=not args.no_compare,
         until_certified=args.until_certified,
         max_heldout_gap=args.max_heldout_gap,
+        write_spec=args.write_spec,
     )
     if args.json:
         _print_json(summary)
@@ -340,9 +341,20 @@ def build_parser() -> argparse.ArgumentParser:
         help="exit 1 when the held-out mean gap exceeds this (default: [tasil] max_heldout_gap, "
         "else the size of the held-out expert trajectories)",
     )
+    q.add_argument(
+        "--write-spec",
+        default=None,
+        metavar="OUT.toml",
+        help="also write the spec with the trained policy in it (blocks, [policy] learned, the "
+        "[tasil] demonstrations), ready for check-spec and certify",
+    )
     q.set_defaults(
         func=cmd_train,
-        files=[("spec", IN, "specification file"), ("out", OUT_DIR, "--out directory")],
+        files=[
+            ("spec", IN, "specification file"),
+            ("out", OUT_DIR, "--out directory"),
+            ("write_spec", OUT_FILE, "--write-spec file"),
+        ],
     )
 
     q = sub.add_parser(

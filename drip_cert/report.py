@@ -8,6 +8,7 @@ from typing import Any
 
 import numpy as np
 
+from drip_cert.errors import SpecError
 from drip_cert.numerics.atomic_io import atomic_write_text
 
 
@@ -239,8 +240,7 @@ def l1_constants_toml(cert: dict[str, Any], settings: Any, source: str = "") -> 
         The certificate has no L1-DRAC part, or a constant without a finite value (named, with
         the fix: give it in the spec's ``[constants]``).
     """
-    from drip_cert.errors import SpecError
-    from drip_cert.spec.settings import toml_text
+    from drip_cert.spec.settings import toml_text  # flint: keep off the report's import path
 
     l1 = cert.get("l1drac")
     if not l1:
