@@ -28,6 +28,7 @@ from typing import Any
 # `drip-cert --help` and a mistyped argument cost a fraction of a second (tests/test_layers.py).
 from drip_cert.diff import DEFAULT_RTOL, diff_files, diff_text
 from drip_cert.errors import AssumptionViolation, DripCertError, FingerprintError, SpecError
+from drip_cert.provenance import ValidationStatus
 from drip_cert.sim.backend import Backend
 
 
@@ -62,7 +63,7 @@ def cmd_certify(args: argparse.Namespace) -> int:
     from drip_cert.spec import load_spec  # sympy: off the start-up path
 
     spec = load_spec(args.spec)
-    cert = certify(spec, progress=not (args.json or args.quiet))
+    cert = certify(spec, progress=_progress(args))
     accepted = cert.certified or (args.allow_estimates and cert.verdict.value == "conditional")
     if args.figure:
         from drip_cert.figures_certificate import certificate_figure  # numpy: off start-up
@@ -91,6 +92,12 @@ def cmd_certify(args: argparse.Namespace) -> int:
                 "\nNOTE: verdict is CONDITIONAL; exit status 0 only because --allow-estimates "
                 "was given (the certificate rests on the items listed above)."
             )
+    if args.export_l1_constants is not None:
+        from drip_cert.numerics.atomic_io import atomic_write_text  # numpy: off the start-up path
+        from drip_cert.report import l1_constants_toml  # numpy: off the start-up path
+
+        text = l1_constants_toml(cert.to_dict(), spec.settings.l1drac, source=str(args.spec))
+        atomic_write_text(Path(args.export_l1_constants), text)
     return 0 if accepted else 1
 
 
@@ -126,11 +133,12 @@ def cmd_train(args: argparse.Namespace) -> int:
         seed=args.seed,
         out=args.out,
         steps=args.steps,
-        progress=not args.json,
+        progress=_progress(args),
         certify=not args.no_certify,
         compare=not args.no_compare,
         until_certified=args.until_certified,
         max_heldout_gap=args.max_heldout_gap,
+        write_spec=args.write_spec,
     )
     if args.json:
         _print_json(summary)
@@ -166,10 +174,10 @@ def cmd_validate(args: argparse.Namespace) -> int:
             args.spec,
             args.data,
             out=args.out,
-            progress=not args.json,
+            progress=_progress(args),
             accept_unfingerprinted=args.accept_unfingerprinted,
         )
-        if report.result.data.fingerprint is None:  # accepted by the flag: say so on stderr
+        if report.unfingerprinted_data:  # accepted by the flag: say so on stderr
             print(
                 f"drip-cert: warning: {args.data}: the data carry no fingerprint; accepted "
                 "unverified by --accept-unfingerprinted",
@@ -183,7 +191,7 @@ def cmd_validate(args: argparse.Namespace) -> int:
             out=args.out,
             practical_ts=args.practical_ts,
             quick=args.quick,
-            progress=not args.json,
+            progress=_progress(args),
             backend=_backend(args),
             policy_dtype=args.policy_dtype,
             dtype=args.dtype,
@@ -193,7 +201,7 @@ def cmd_validate(args: argparse.Namespace) -> int:
     else:
         print(validation_text(report.to_dict()))
     # exit 0 only when a finite bound was checked and none is violated (not "nothing checked")
-    return 0 if report.status == "holds" else 1
+    return 0 if report.status == ValidationStatus.HOLDS else 1
 
 
 def cmd_diff(args: argparse.Namespace) -> int:
@@ -213,7 +221,7 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
         out=args.out,
         quick=args.quick,
         seed=args.seed,
-        progress=not args.json,
+        progress=_progress(args),
         backend=_backend(args),
         policy_dtype=args.policy_dtype,
         dtype=args.dtype,
@@ -235,19 +243,18 @@ def build_parser() -> argparse.ArgumentParser:
     sub = p.add_subparsers(dest="command", required=True)
 
     q = sub.add_parser("check-spec", help="parse and validate a TOML specification only")
-    q.add_argument("spec")
-    q.add_argument("--json", action="store_true")
+    q.add_argument("spec", help=SPEC_HELP)
+    q.add_argument("--json", action="store_true", help=JSON_HELP)
     q.set_defaults(func=cmd_check_spec, files=[("spec", IN, "specification file")])
 
     q = sub.add_parser("certify", help="compute the certificate of a system")
-    q.add_argument("spec")
-    q.add_argument("--json", action="store_true", help="print JSON on stdout")
+    q.add_argument("spec", help=SPEC_HELP)
+    q.add_argument("--json", action="store_true", help=JSON_HELP)
     q.add_argument(
         "--allow-estimates",
         action="store_true",
         help="exit 0 for a conditional verdict too (one resting on estimates or unproved regions)",
     )
-    q.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     q.add_argument(
         "--figure",
         default=None,
@@ -255,14 +262,29 @@ def build_parser() -> argparse.ArgumentParser:
         help="draw the assumption margins and the proved sets (support, proof boxes, invariant "
         "set) in x here (png, svg or pdf)",
     )
+    q.add_argument(
+        "--export-l1-constants",
+        default=None,
+        metavar="FILE",
+        help="write the L1-DRAC constants and design inputs as a complete `drip-cert design-l1` "
+        "file (.toml), to explore T_s and rho without certifying again",
+    )
     q.set_defaults(
         func=cmd_certify,
-        files=[("spec", IN, "specification file"), ("figure", FIGURE, "--figure file")],
+        files=[
+            ("spec", IN, "specification file"),
+            ("figure", FIGURE, "--figure file"),
+            ("export_l1_constants", OUT_FILE, "--export-l1-constants file"),
+        ],
     )
 
     q = sub.add_parser("design-l1", help="L1-DRAC parameter feasibility from a constants file")
-    q.add_argument("constants")
-    q.add_argument("--json", action="store_true")
+    q.add_argument(
+        "constants",
+        help="a TOML file of the L1-DRAC constants (examples/l1drac_constants; "
+        "certify --export-l1-constants writes one)",
+    )
+    q.add_argument("--json", action="store_true", help=JSON_HELP)
     q.add_argument(
         "--Ts",
         type=float,
@@ -285,13 +307,39 @@ def build_parser() -> argparse.ArgumentParser:
     )
 
     q = sub.add_parser("train", help="train an imitation policy (TaSIL or BC)")
-    q.add_argument("spec")
-    q.add_argument("--method", choices=["tasil", "bc"], default="tasil")
-    q.add_argument("--trajectories", type=_posint, default=20)
-    q.add_argument("--seed", type=_nonneg_int, default=0)
-    q.add_argument("--steps", type=_posint, default=None)
-    q.add_argument("--out", required=True)
-    q.add_argument("--json", action="store_true")
+    q.add_argument("spec", help=SPEC_HELP)
+    q.add_argument(
+        "--method",
+        choices=["tasil", "bc"],
+        default="tasil",
+        help="the loss: TaSIL (matches the policy's Jacobian too) or behaviour cloning "
+        "(default: %(default)s)",
+    )
+    q.add_argument(
+        "--trajectories",
+        type=_posint,
+        default=20,
+        help="expert demonstrations to draw (default: %(default)s)",
+    )
+    q.add_argument(
+        "--seed",
+        type=_nonneg_int,
+        default=0,
+        help="seed of the demonstrations and the training (default: %(default)s)",
+    )
+    q.add_argument(
+        "--steps",
+        type=_posint,
+        default=None,
+        help="optimiser steps (default: [tasil] steps of the spec)",
+    )
+    q.add_argument(
+        "--out",
+        required=True,
+        metavar="DIR",
+        help="directory for the weights, the training curves and the summary (created)",
+    )
+    q.add_argument("--json", action="store_true", help=JSON_HELP)
     q.add_argument("--no-certify", action="store_true", help="skip the certificate of the policy")
     q.add_argument(
         "--no-compare", action="store_true", help="do not train the other method for comparison"
@@ -310,23 +358,39 @@ def build_parser() -> argparse.ArgumentParser:
         help="exit 1 when the held-out mean gap exceeds this (default: [tasil] max_heldout_gap, "
         "else the size of the held-out expert trajectories)",
     )
+    q.add_argument(
+        "--write-spec",
+        default=None,
+        metavar="OUT.toml",
+        help="also write the spec with the trained policy in it (blocks, [policy] learned, the "
+        "[tasil] demonstrations), ready for check-spec and certify",
+    )
     q.set_defaults(
         func=cmd_train,
-        files=[("spec", IN, "specification file"), ("out", OUT_DIR, "--out directory")],
+        files=[
+            ("spec", IN, "specification file"),
+            ("out", OUT_DIR, "--out directory"),
+            ("write_spec", OUT_FILE, "--write-spec file"),
+        ],
     )
 
     q = sub.add_parser(
         "export-policy", help="write the learned policy's network as ONNX (docs/networks.md)"
     )
-    q.add_argument("spec")
+    q.add_argument("spec", help=SPEC_HELP)
     q.add_argument("--out", default="policy.onnx", help="the .onnx file to write")
-    q.add_argument("--dtype", choices=["float64", "float32"], default="float64")
+    q.add_argument(
+        "--dtype",
+        choices=["float64", "float32"],
+        default="float64",
+        help="the floats of the written weights (default: %(default)s)",
+    )
     q.add_argument("--block", default=None, help="the MLP block (default: the learned policy's)")
-    q.add_argument("--json", action="store_true")
+    q.add_argument("--json", action="store_true", help=JSON_HELP)
     q.set_defaults(func=cmd_export_policy, files=[("spec", IN, "specification file")])
 
     q = sub.add_parser("validate", help="check a certificate against Monte-Carlo simulation")
-    q.add_argument("spec")
+    q.add_argument("spec", help=SPEC_HELP)
     q.add_argument("--trajectories", type=_posint, default=1000, help="simulated paths")
     q.add_argument(
         "--seed",
@@ -334,14 +398,21 @@ def build_parser() -> argparse.ArgumentParser:
         default=None,
         help="one seed for demonstrations, training and simulation (default: [tasil] seed)",
     )
-    q.add_argument("--out", default=None)
+    q.add_argument(
+        "--out",
+        default=None,
+        metavar="DIR",
+        help="directory for validation.json and the figures (created; default: none written)",
+    )
     q.add_argument(
         "--practical-ts",
         type=_posfloat,
         default=None,
         help="simulate at this T_s when the certified one is impractically small",
     )
-    q.add_argument("--quick", action="store_true")
+    q.add_argument(
+        "--quick", action="store_true", help="fewer paths and a shorter horizon: a smoke test"
+    )
     q.add_argument(
         "--data",
         default=None,
@@ -355,7 +426,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="with --data: accept data without a fingerprint (with a warning) instead of "
         "refusing them (docs/data_format.md)",
     )
-    q.add_argument("--json", action="store_true")
+    q.add_argument("--json", action="store_true", help=JSON_HELP)
     _add_simulation_options(q)
     q.set_defaults(
         func=cmd_validate,
@@ -367,11 +438,23 @@ def build_parser() -> argparse.ArgumentParser:
     )
 
     q = sub.add_parser("reproduce", help="reproduce a paper experiment end to end")
-    q.add_argument("name", choices=["paper-4d"])
-    q.add_argument("--out", default="demo_out")
-    q.add_argument("--quick", action="store_true")
-    q.add_argument("--seed", type=_nonneg_int, default=0)
-    q.add_argument("--json", action="store_true")
+    q.add_argument("name", choices=["paper-4d"], help="the experiment: %(choices)s")
+    q.add_argument(
+        "--out",
+        default="demo_out",
+        metavar="DIR",
+        help="directory for the certificate, the report and the figures (default: %(default)s)",
+    )
+    q.add_argument(
+        "--quick", action="store_true", help="fewer paths and training steps: a smoke test"
+    )
+    q.add_argument(
+        "--seed",
+        type=_nonneg_int,
+        default=0,
+        help="one seed for demonstrations, training and simulation (default: %(default)s)",
+    )
+    q.add_argument("--json", action="store_true", help=JSON_HELP)
     _add_simulation_options(q)
     q.set_defaults(func=cmd_reproduce, files=[("out", OUT_DIR, "--out directory")])
 
@@ -393,12 +476,13 @@ def build_parser() -> argparse.ArgumentParser:
         default=DEFAULT_RTOL,
         help=f"relative tolerance of a bound change (default {DEFAULT_RTOL:g})",
     )
-    q.add_argument("--json", action="store_true")
+    q.add_argument("--json", action="store_true", help=JSON_HELP)
     q.set_defaults(
         func=cmd_diff, files=[("old", IN, "baseline file"), ("new", IN, "file to compare")]
     )
     for q in sub.choices.values():  # `drip-cert CMD ... --debug` works as well as before CMD
         q.add_argument("--debug", action="store_true", default=argparse.SUPPRESS, help=DEBUG_HELP)
+        q.add_argument("--quiet", action="store_true", help=QUIET_HELP)
     return p
 
 
@@ -433,6 +517,12 @@ def _add_simulation_options(q: argparse.ArgumentParser) -> None:
         "L1-DRAC (float32: about 2x faster; its effect on the gaps is measured against float64 "
         "and reported; the certificate stays float64)",
     )
+
+
+def _progress(args: argparse.Namespace) -> bool:
+    """Stage lines (and, on a terminal, progress bars) on stderr: not with ``--json`` or
+    ``--quiet``."""
+    return not (args.json or args.quiet)
 
 
 def _backend(args: argparse.Namespace) -> Backend:
@@ -492,9 +582,15 @@ def _nonneg_int(text: str) -> int:
 
 # ---------------------------------------------------------------------------- files and errors
 #: roles of the files a command names (``set_defaults(files=[(dest, role, what), ...])``)
-IN, OUT_DIR, FIGURE = "input file", "output directory", "figure file"
+IN, OUT_DIR, FIGURE, OUT_FILE = "input file", "output directory", "figure file", "output file"
 
 DEBUG_HELP = "on an error, also print the traceback (attach it to a bug report)"
+QUIET_HELP = (
+    "nothing on stderr but warnings and errors: no stage lines, no progress bars (bars are "
+    "drawn only when stderr is a terminal anyway)"
+)
+JSON_HELP = "print JSON on stdout (and no progress on stderr)"
+SPEC_HELP = "the TOML specification of the system (docs: the spec reference)"
 
 
 def check_files(args: argparse.Namespace) -> None:
@@ -523,6 +619,8 @@ def check_files(args: argparse.Namespace) -> None:
             input_file(value, what)
         elif role == OUT_DIR:
             output_dir(value, what)
+        elif role == OUT_FILE:
+            output_file(value, what)
         else:
             _check_figure(output_file(value, what), what)
 

@@ -109,14 +109,17 @@ def l1drac_controller(
 
     cert = certificate_of(source, progress=progress)
     l1 = cert.l1
-    if l1 is None or not l1.feasible:
-        why = "no [l1drac] table" if l1 is None else (l1.design.reason or "infeasible")
+    d = None if l1 is None else l1.design
+    if d is None or not d.feasible or d.omega is None or d.lambda_s is None or d.Ts is None:
+        if l1 is None:
+            why = "no [l1drac] table"
+        else:  # no design at all (an assumption failed before the designer ran): l1.error
+            why = (l1.error if d is None else d.reason) or "infeasible"
         raise SpecError(
             f"the certificate has no feasible L1-DRAC design ({why}): there is no certified "
             "controller to deploy",
             field="l1drac",
         )
-    d = l1.design
     if dt is None:
         if isinstance(source, str | os.PathLike | Spec | System):
             sim_dt = _spec(source).settings.simulation.dt

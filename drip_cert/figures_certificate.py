@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import itertools
 import math
+import os
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -178,6 +179,11 @@ def certificate_figure(
         ax.set_aspect("equal", adjustable="datalim")
     fig.tight_layout()
     out = Path(path)
-    fig.savefig(out)
-    plt.close(fig)
+    tmp = out.with_name(f".{out.stem}.partial{out.suffix}")  # the suffix picks the format
+    try:
+        fig.savefig(tmp)
+        os.replace(tmp, out)  # never a half-written figure under the user's name
+    finally:
+        plt.close(fig)
+        tmp.unlink(missing_ok=True)
     return out

@@ -2,6 +2,8 @@
 
 Used by ``certify`` (constants, contraction, invariant sets, TaSIL, L1-DRAC design) and the
 pipeline; silent unless enabled (the command line enables it unless ``--json`` or ``--quiet``).
+Progress *bars* (tqdm, redrawn in place) are shown only when stderr is a terminal
+(:func:`bars_enabled`): in a log file or a CI job they would be thousands of lines.
 """
 
 from __future__ import annotations
@@ -10,7 +12,20 @@ import sys
 import time
 from typing import TextIO
 
-__all__ = ["Stages"]
+__all__ = ["Stages", "bars_enabled"]
+
+
+def bars_enabled(progress: bool, stream: TextIO | None = None) -> bool:
+    """Whether to draw a progress bar: ``progress`` asked for and ``stream`` (default stderr) is
+    a terminal. Stage lines (:class:`Stages`) need only ``progress``: one line each, fine in logs.
+    """
+    if not progress:
+        return False
+    out = stream if stream is not None else sys.stderr
+    try:
+        return bool(out.isatty())
+    except (AttributeError, ValueError):  # a closed or a file-like stream without isatty
+        return False
 
 
 class Stages:

@@ -312,6 +312,29 @@ class Quantity:
         }
 
 
+class CheckStatus(StrEnum):
+    """The status of one :class:`Check` of a certificate (``Check.status``; JSON ``status``).
+
+    The words of a validation (:class:`ValidationStatus`) differ on purpose: a certificate's
+    check *fails* (a proved condition is false), an empirical check is *violated* (data
+    contradict a bound at a confidence level).
+    """
+
+    HOLDS = "holds"  #: the condition holds
+    FAILS = "fails"  #: the condition is false (by ``-margin``)
+    UNKNOWN = "unknown"  #: a side of the comparison is NaN: it could not be evaluated
+
+
+class ValidationStatus(StrEnum):
+    """The status of an empirical check (``EmpiricalCheck.status``) and of a validation
+    (``ValidationReport.status``), as :mod:`drip_cert.validate` computes them."""
+
+    HOLDS = "holds"  #: a finite bound was compared and not violated at the stated confidence
+    VIOLATED = "violated"  #: the one-sided lower confidence bound exceeds the bound
+    NOT_CHECKED = "not_checked"  #: nothing was compared (the check's ``reason`` says why)
+    NOTHING_CHECKED = "nothing_checked"  #: a report's status: no check holds, none is violated
+
+
 @dataclass(frozen=True)
 class Check:
     """The verdict of one condition.
@@ -350,11 +373,11 @@ class Check:
         return math.isnan(self.lhs) != math.isnan(self.rhs)
 
     @property
-    def status(self) -> str:
-        """``"holds"``, ``"fails"`` or ``"unknown"`` (a side of the comparison is NaN)."""
+    def status(self) -> CheckStatus:
+        """``holds``, ``fails`` or ``unknown`` (a side of the comparison is NaN)."""
         if self.holds:
-            return "holds"
-        return "unknown" if self._one_side_nan else "fails"
+            return CheckStatus.HOLDS
+        return CheckStatus.UNKNOWN if self._one_side_nan else CheckStatus.FAILS
 
     @property
     def proved(self) -> bool:
@@ -474,7 +497,8 @@ def verdict_of(checks: Sequence[Check]) -> tuple[Verdict, tuple[str, ...]]:
     failing = [c for c in checks if not c.holds]
     if failing:
         return Verdict.NOT_CERTIFIED, tuple(
-            f"{c.id} {'could not be evaluated' if c.status == 'unknown' else 'fails'}: {c.detail}"
+            f"{c.id} {'could not be evaluated' if c.status == CheckStatus.UNKNOWN else 'fails'}: "
+            f"{c.detail}"
             for c in failing
         )
     reasons: list[str] = []

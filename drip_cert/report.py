@@ -8,6 +8,7 @@ from typing import Any
 
 import numpy as np
 
+from drip_cert.errors import SpecError
 from drip_cert.numerics.atomic_io import atomic_write_text
 
 
@@ -70,6 +71,7 @@ def certificate_markdown(cert: Any) -> str:
         lines.append("What the verdict rests on:")
         lines.append("")
         lines.extend(f"* {r}" for r in d["verdict_reasons"])
+    lines += _coordinate_lines(d["coordinates"], d["verdict"])
     if d["estimated_constants"]:
         lines.append("")
         lines.append(
@@ -137,6 +139,14 @@ def certificate_markdown(cert: Any) -> str:
             "",
             f"_{t.get('label', '')}_",
         ]
+        held_out = [f for f in t.get("forms") or [] if f.get("name") == "held_out"]
+        if t.get("vacuous") and held_out and not held_out[0].get("holds"):
+            lines += [
+                "",
+                f"The held-out form fails: more demonstrations (n = {t.get('n')} training, "
+                f"n_val = {t.get('n_val')} held-out now; raise [tasil] trajectories and "
+                "heldout), or a closer fit (more [tasil] steps).",
+            ]
     if d.get("l1drac"):
         lines += ["", "## L1-DRAC design", "", l1_design_text(d["l1drac"])]
     r = d["rho"]
@@ -149,6 +159,150 @@ def certificate_markdown(cert: Any) -> str:
     ]
     if d["notes"]:
         lines += ["", "## Notes", ""] + [f"* {n}" for n in d["notes"]]
+    return "\n".join(lines) + "\n"
+
+
+def _matrix_lines(name: str, rows: list[list[float]]) -> list[str]:
+    """``name = [[a, b], [c, d]]`` one row a line, 6 digits."""
+    body = [f"  [{', '.join(_f(v) for v in row)}]" for row in rows]
+    return [f"{name} =", *body]
+
+
+def _coordinate_lines(co: dict[str, Any], verdict: str) -> list[str]:
+    """The coordinates the certificate was computed in (Theta, P, the conversion factor to x)
+    and, when it is not certified, every other coordinate candidate with its reasons, the one
+    that came closest first (fewest failing checks, then the smallest radius in x)."""
+    out: list[str] = []
+    if co.get("system") == "z = Theta x":
+        out += [
+            "",
+            "## Coordinates",
+            "",
+            "Computed in z = Theta x (docs/math/contraction.md section 5): rates, gains, "
+            "constants, boxes and regions below are in z; the radii rho are mapped back to x "
+            f"by factor_to_x = {_f(co.get('factor_to_x'))} >= ||Theta^-1||_2 (cond Theta >= "
+            f"{_f(co.get('cond_theta_at_least'))}). Metric: {co.get('source', '')}.",
+            "",
+            "```",
+            *_matrix_lines("Theta", co["theta"]),
+            *_matrix_lines("P = Theta^T Theta", co["P"]),
+            "```",
+            "",
+            "A region you give in [contraction] region is in x (it is mapped to z for you).",
+        ]
+    alts = co.get("alternatives") or []
+    if verdict != "certified" and alts:
+        ranked = sorted(alts, key=_closeness)
+        out += ["", "## Other coordinates tried (closest first)", ""]
+        for a in ranked:
+            where = a["coordinates"] + (
+                "" if a.get("cond_theta") is None else f" (cond Theta {_f(a['cond_theta'])})"
+            )
+            out.append(
+                f"* {where}: {a['verdict'].replace('_', ' ')}, rho_TaSIL = "
+                f"{_f(a.get('rho_tasil_x'))}, rho_L1 = {_f(a.get('rho_l1_x'))} (in x)"
+            )
+            out.extend(f"  * {r}" for r in a.get("verdict_reasons") or [])
+    return out
+
+
+_VERDICT_RANK = {"certified": 0, "conditional": 1, "not_certified": 2}
+
+
+def _closeness(a: dict[str, Any]) -> tuple[int, int, float]:
+    """Order of the coordinate candidates: verdict, failing checks, then the radius in x."""
+    parts = [v for v in (a.get("rho_tasil_x"), a.get("rho_l1_x")) if v is not None]
+    rho = sum(parts) if parts and all(math.isfinite(v) for v in parts) else math.inf
+    return _VERDICT_RANK.get(a.get("verdict", ""), 3), int(a.get("failing", 0)), rho
+
+
+def l1_constants_toml(cert: dict[str, Any], settings: Any, source: str = "") -> str:
+    """A complete ``drip-cert design-l1`` input from a certificate's L1-DRAC part.
+
+    ``[constants]``: every constant of ``l1drac.constants_used`` (with ``p_star``, ``m`` and
+    ``lip_f``), each with its provenance in a comment; ``[design]``: ``p`` and the designed
+    ``lambda_s``, and the spec's own design inputs (``[l1drac]`` ``omega``, ``Ts``, ``rho_r``,
+    ``rho_a``, ``delta``, ``objective``, ``rho_budget``, ``front``) when it gives them, so that
+    ``design-l1`` repeats the certificate's design search.
+
+    Parameters
+    ----------
+    cert
+        ``Certificate.to_dict()``.
+    settings
+        The spec's :class:`~drip_cert.spec.settings.L1Settings`.
+    source
+        The spec file, for the header comment.
+
+    Raises
+    ------
+    SpecError
+        The certificate has no L1-DRAC part, or a constant without a finite value (named, with
+        the fix: give it in the spec's ``[constants]``).
+    """
+    from drip_cert.spec.settings import toml_text  # flint: keep off the report's import path
+
+    l1 = cert.get("l1drac")
+    if not l1:
+        raise SpecError(
+            "the certificate has no L1-DRAC part: add an [l1drac] table to the spec (p, "
+            "lambda_s) to export its constants",
+            field="l1drac",
+            path=source or None,
+        )
+    used = l1["constants_used"]
+    missing = [
+        k
+        for k, q in used.items()
+        if isinstance(q, dict) and not (isinstance(q["value"], int | float))
+    ]
+    if missing:
+        raise SpecError(
+            f"constants without a finite value: {', '.join(missing)}; give them in the spec's "
+            "[constants] table, then export again",
+            field="l1drac.constants_used",
+            path=source or None,
+        )
+    coords = cert.get("coordinates", {}).get("system", "x")
+    lines = [
+        f"# L1-DRAC constants of the certificate of {source or 'a spec'} "
+        f"(drip-cert certify --export-l1-constants); verdict {cert['verdict']}.",
+        f"# Coordinates: {coords}. Each value with how it was obtained (exact / sound / "
+        "estimate / given).",
+        "# Usage: drip-cert design-l1 THIS_FILE [--Ts ...] [--rho-budget ...]",
+        *(
+            []
+            if coords == "x"
+            else [
+                "# The constants are those of the system in z = Theta x: design-l1's rho is in z;"
+                f" rho in x <= factor_to_x * rho_z, factor_to_x = "
+                f"{cert['coordinates'].get('factor_to_x')}"
+            ]
+        ),
+        "",
+        "[constants]",
+    ]
+    for name, q in used.items():
+        if isinstance(q, dict):
+            lines.append(f"{name} = {toml_text(float(q['value']))}  # {q['how']}: {q['source']}")
+        else:
+            lines.append(f"{name} = {toml_text(q)}")
+    lines += ["", "[design]", f"p = {int(l1.get('p') or settings.p)}"]
+    lambda_s = settings.lambda_s if settings.lambda_s is not None else l1.get("lambda_s")
+    if lambda_s is None:
+        raise SpecError(
+            "the certificate has no designed lambda_s (the design is infeasible): give "
+            "[l1drac] lambda_s in the spec to export a design-l1 file",
+            field="l1drac.lambda_s",
+            path=source or None,
+        )
+    lines.append(f"lambda_s = {toml_text(float(lambda_s))}")
+    for key in ("omega", "Ts", "rho_r", "rho_a", "delta", "objective", "rho_budget"):
+        value = getattr(settings, key)
+        if value is not None:
+            lines.append(f"{key} = {toml_text(value)}")
+    if not settings.front:
+        lines.append("front = false")
     return "\n".join(lines) + "\n"
 
 

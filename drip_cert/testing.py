@@ -46,6 +46,7 @@ import pytest
 from drip_cert.diff import DEFAULT_RTOL, DiffResult, diff_outputs, diff_text
 from drip_cert.errors import DripCertError
 from drip_cert.numerics.atomic_io import atomic_write_json, jsonable
+from drip_cert.provenance import ValidationStatus
 from drip_cert.schema import LoadedOutput, check_output, load_output
 from drip_cert.spec import load_spec
 from drip_cert.workflows import validate_recorded
@@ -171,7 +172,7 @@ def assert_gaps_within(
         )
     except DripCertError as exc:
         pytest.fail(f"drip-cert could not validate {data} against {spec}: {exc}", pytrace=False)
-    if rep.result.data.fingerprint is None:  # accepted unverified (else refused above)
+    if rep.unfingerprinted_data:  # accepted unverified (else refused above)
         warnings.warn(
             UnfingerprintedData(
                 f"{data}: the data carry no fingerprint; accepted unverified by "
@@ -179,11 +180,11 @@ def assert_gaps_within(
             ),
             stacklevel=2,
         )
-    if rep.status == "holds":
+    if rep.status == ValidationStatus.HOLDS:
         return rep
     lines = [f"{data} against {spec}: validation {rep.status.upper()}"]
     for c in rep.all_checks:
-        if c.status == "violated":
+        if c.status == ValidationStatus.VIOLATED:
             lines.append(
                 f"  {c.name}: empirical {c.empirical:.6g} (one-sided confidence bound "
                 f"{c.confidence_low:.6g} at level {c.level}) exceeds the certified bound "

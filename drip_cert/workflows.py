@@ -43,6 +43,7 @@ from drip_cert.report import (
 )
 from drip_cert.spec import load_spec
 from drip_cert.spec.load import Spec, SpecSource, as_spec
+from drip_cert.spec.write import read_document, spec_with_policy, toml_document
 
 if TYPE_CHECKING:
     from drip_cert.bounds.certificate import Certificate
@@ -274,8 +275,13 @@ def train_from_spec(
     compare: bool = True,
     until_certified: int = 0,
     max_heldout_gap: float | None = None,
+    write_spec: str | Path | None = None,
 ) -> dict[str, Any]:
     """``drip-cert train``: demonstrations, training, held-out gap, certificate; writes ``out``.
+
+    ``write_spec``: also write the spec with the trained policy in it (``[blocks.pi_il]``,
+    ``[policy] learned``, the ``[tasil]`` demonstrations; relative paths re-based on its
+    directory), a file that ``check-spec`` accepts and ``certify`` certifies as it is.
 
     Files: ``policy.npz``/``policy.json`` (the MLP), ``demonstrations.npz`` (training data),
     ``train.json`` (settings, losses, timings, held-out gaps, the certificate's verdict and
@@ -296,7 +302,11 @@ def train_from_spec(
     from drip_cert.learn.data import save_demonstrations  # jax: keep off the CLI start-up path
 
     output_dir(out)  # before the training: an --out that is a file fails now, not at the end
+    if write_spec is not None:
+        output_file(write_spec, "--write-spec file")
     spec = load_spec(spec_path)
+    if write_spec is not None and spec.path is None:
+        raise SpecError("write_spec needs the spec as a file (it is copied with the policy)")
     other = "bc" if method == "tasil" else "tasil"
     methods = (method, other) if compare else (method,)
     steps0 = steps or spec.settings.tasil.steps
@@ -376,6 +386,34 @@ def train_from_spec(
             f"samples = {st.samples}\nheldout = {st.heldout}"
         ),
     }
+    if write_spec is not None:
+        assert spec.path is not None  # checked before the training
+        doc = spec_with_policy(
+            read_document(spec.path),
+            source=spec.path,
+            target=write_spec,
+            block="pi_il",
+            block_table={
+                "kind": "mlp",
+                "weights": str(out / "policy.npz"),
+                "inputs": s.n,
+                "outputs": s.m,
+            },
+            learned=learned,
+            tasil={
+                "method": method,
+                "seed": seed,
+                "trajectories": trajectories,
+                "samples": st.samples,
+                "heldout": st.heldout,
+            },
+        )
+        header = (
+            f"{spec.path} with the policy trained by drip-cert train ({method}, seed {seed}, "
+            f"{trajectories} trajectories); weights in {out}"
+        )
+        atomic_write_text(Path(write_spec), toml_document(doc, header))
+        summary["spec"] = str(write_spec)
     atomic_write_json(out / "train.json", summary)
     return summary
 
@@ -495,9 +533,12 @@ def _training_failures(
         if not math.isfinite(mean):
             out.append("the learned closed loop diverges from some held-out initial states")
         elif mean > thr:
+            n = tp.settings.trajectories
             out.append(
                 f"held-out gap mean {mean:.4g} exceeds the threshold {thr:.4g}"
                 + ("" if given is not None else f" ({GAP_THRESHOLD_NOTE})")
+                + f": train on more demonstrations (n = {n} now: --trajectories {2 * n}) or "
+                f"for longer (--steps, now {tp.settings.steps})"
             )
     return out
 
@@ -558,7 +599,7 @@ def validate_spec(
     rep = run.validations[0].with_notes_before(run.notes)
     if out is not None:
         out = Path(out)
-        rep.result.save(out / "simulation")
+        rep.simulation.save(out / "simulation")
         atomic_write_json(out / "validation.json", rep.to_dict())
         write_validation_outputs(rep, out)  # validation.md and validation.png beside the JSON
     return rep
@@ -684,7 +725,7 @@ def reproduce(
     atomic_write_text(out / "certificate.md", certificate_markdown(cert))
     paper, ours = run.validations
     runs = {"paper": paper, "ours": ours}
-    res = ours.result
+    res = ours.simulation
     res.save(out / "simulation")
     claims = qualitative_claims(res)
     fig_paths = reproduce_figure(

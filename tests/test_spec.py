@@ -98,7 +98,7 @@ def test_paper_example_loads_and_expert_cancels_h():
             'expert = ["-x1 - 2*x2"]',
             'expert = ["-x1 - 2*t"]',
             "policy.expert[0]",
-            "unknown symbol 't'",
+            "the name 't' cannot be used here",
         ),
         ("[initial]", "[initals]", "initals", "unknown section"),
         ('name = "example"', 'name = "example"\ncolour = "red"', "system.colour", "unknown key"),

@@ -53,6 +53,10 @@ from drip_cert.spec.load import Spec, SpecSource, as_spec
 from drip_cert.spec.settings import ContractionSettings
 
 if TYPE_CHECKING:
+    from drip_cert.analysis.iss import DeltaISSResult
+    from drip_cert.analysis.lmi import MetricResult
+    from drip_cert.bounds.l1drac.system import L1Section
+    from drip_cert.bounds.tasil.certificate import TasilCertificate
     from drip_cert.learn.imitation import DemonstrationSet
     from drip_cert.model.mlp import MLP
 
@@ -63,7 +67,7 @@ class ContractionAnalysis:
 
     policy: str
     euclidean: ContractionResult
-    metric: Any | None  # drip_cert.analysis.lmi.MetricResult
+    metric: MetricResult | None
     metric_error: str = ""
 
     def to_dict(self) -> dict[str, Any]:
@@ -183,9 +187,9 @@ class Certificate:
     uncertainty: UncertaintyConstants
     contraction_expert: ContractionAnalysis
     contraction_learned: ContractionAnalysis | None
-    delta_iss: Any | None  # drip_cert.analysis.iss.DeltaISSResult
-    l1: Any | None = None  # drip_cert.bounds.l1drac.system.L1Section
-    tasil: Any | None = None  # drip_cert.bounds.tasil.TasilCertificate
+    delta_iss: DeltaISSResult | None
+    l1: L1Section | None = None
+    tasil: TasilCertificate | None = None
     tasil_provenance: Mapping[str, Any] = field(default_factory=dict)
     notes: tuple[str, ...] = ()
     invariance: InvariantSet | None = None
@@ -279,9 +283,10 @@ class Certificate:
     @property
     def rho_l1_native(self) -> float | None:
         """``rho_L1`` in the coordinates the certificate was computed in (``system.states``)."""
-        if self.l1 is None or not self.l1.feasible:
+        design = None if self.l1 is None else self.l1.design
+        if design is None or not design.feasible or design.rho is None:
             return None
-        return float(self.l1.design.rho)
+        return float(design.rho)
 
     @property
     def rho_tasil_native(self) -> float | None:
@@ -625,6 +630,8 @@ def _summary(c: Certificate) -> dict[str, Any]:
         "rho_tasil_x": json_float(c.rho_tasil) if c.rho_tasil is not None else None,
         "rho_l1_x": json_float(c.rho_l1) if c.rho_l1 is not None else None,
         "factor_to_x": None if c.coordinates is None else c.coordinates.to_x,
+        "failing": sum(1 for a in c.assumptions if not a.holds),
+        "verdict_reasons": list(c.verdict_reasons),
     }
 
 

@@ -21,6 +21,7 @@ that names the field, the offending text and what is allowed.
 from __future__ import annotations
 
 import ast
+import difflib
 import re
 from collections.abc import Callable, Mapping, Sequence
 
@@ -63,6 +64,7 @@ def parse_expression(
     vector: Sequence[sp.Symbol] = (),
     blocks: Mapping[str, Block] | None = None,
     path: str | None = None,
+    hints: Mapping[str, str] | None = None,
 ) -> sp.Expr:
     """Parse one user expression into a sympy expression, safely.
 
@@ -82,6 +84,9 @@ def parse_expression(
         Declared blocks by name.
     path
         The specification file, for error messages.
+    hints
+        Names that are declared but may not appear in this field, each with the fix the message
+        gives (the time in a policy: "move the feed-forward term into f"; an input name).
 
     Raises
     ------
@@ -114,7 +119,9 @@ def parse_expression(
     except (SyntaxError, ValueError, RecursionError, MemoryError) as exc:
         msg = getattr(exc, "msg", None) or type(exc).__name__
         raise SpecError(f"cannot parse {text!r}: {msg}", field=field, path=path) from None
-    parser = _Parser(source, field, path, dict(scalars), vector_name, tuple(vector), blocks)
+    parser = _Parser(
+        source, field, path, dict(scalars), vector_name, tuple(vector), blocks, dict(hints or {})
+    )
     try:
         out = parser.visit(tree.body)
     except RecursionError:
@@ -135,8 +142,9 @@ class _Parser:
 
     _lines: list[bytes] | None
 
-    def __init__(self, text, field, path, scalars, vector_name, vector, blocks):
+    def __init__(self, text, field, path, scalars, vector_name, vector, blocks, hints):
         self.text = text
+        self.hints = hints
         self.field = field
         self.path = path
         self.scalars = scalars
@@ -153,7 +161,7 @@ class _Parser:
         if self.vector_name:
             names += f", {self.vector_name} (the state vector, in norm() and block calls)"
         return SpecError(
-            f"{what} in {self.text!r}; " + _ALLOWED_HELP.format(symbols=names, blocks=blk),
+            f"in {self.text!r}: {what}; " + _ALLOWED_HELP.format(symbols=names, blocks=blk),
             field=self.field,
             path=self.path,
         )
@@ -202,7 +210,10 @@ class _Parser:
             return CONSTANTS[name]
         if name in FUNCTIONS or name == "norm" or name in self.blocks:
             raise self.fail(f"the function {name!r} must be called")
-        raise self.fail(f"unknown symbol {name!r}")
+        if name in self.hints:
+            raise self.fail(f"the name {name!r} cannot be used here: {self.hints[name]}")
+        known = [*self.scalars, *CONSTANTS]  # not the vector x: x3 is a misspelt x2, not x
+        raise self.fail(f"unknown symbol {name!r}{_did_you_mean(name, known)}")
 
     def visit_UnaryOp(self, node: ast.UnaryOp):
         operand = self._scalar(node.operand)
@@ -228,6 +239,9 @@ class _Parser:
             return a / b
         if isinstance(op, ast.Pow):
             return a**b
+        if isinstance(op, ast.BitXor):  # x1^3: the power of other languages, xor in Python
+            fixed = self.text.replace("^", "**")
+            raise self.fail(f"'^' is not a power here: use ** for powers, as in {fixed!r}")
         raise self.fail(f"the operator {type(op).__name__} is not allowed")
 
     def visit_Call(self, node: ast.Call):
@@ -239,6 +253,9 @@ class _Parser:
             and isinstance(node.value.func, ast.Name)
             and node.value.func.id in self.blocks
         ):
+            called = node.value
+            if isinstance(called, ast.Call) and isinstance(called.func, ast.Name):
+                raise self.fail(self._undeclared_block(called.func.id))
             raise self.fail("subscripts are allowed only on block calls, as h(x)[0]")
         sl = node.slice
         if not (
@@ -288,7 +305,7 @@ class _Parser:
                     f"output index {index} of block {name!r} is out of range 0..{block.out_dim - 1}"
                 )
             return block.component(index)(*args)
-        if index is not None:
+        if index is not None:  # pragma: no cover - visit_Subscript admits block calls only
             raise self.fail("subscripts are allowed only on block calls")
         if name == "norm":
             args = self._args(node)
@@ -296,13 +313,31 @@ class _Parser:
                 raise self.fail("norm() needs an argument")
             return sp.sqrt(sum(a**2 for a in args))
         if name not in FUNCTIONS:
-            raise self.fail(f"unknown function {name!r}")
+            close = _did_you_mean(name, [*FUNCTIONS, "norm", *self.blocks])
+            if close:
+                raise self.fail(f"unknown function {name!r}{close}")
+            raise self.fail(self._undeclared_block(name))
         args = [self._scalar(a) for a in node.args]
         if name in _UNARY and len(args) != 1:
             raise self.fail(f"{name}() takes exactly one argument")
         if name in ("Max", "Min") and len(args) < 2:
             raise self.fail(f"{name}() takes at least two arguments")
         return FUNCTIONS[name](*args)
+
+    def _undeclared_block(self, name: str) -> str:
+        """The message of a call of ``name``, which is neither a function nor a block."""
+        declared = ", ".join(sorted(self.blocks)) or "none"
+        return (
+            f"unknown function {name!r}, and no block of that name (blocks declared: "
+            f"{declared}): to call a network, declare it in a table [blocks.{name}] with "
+            'kind = "mlp" and weights = FILE (.onnx, .safetensors or .npz); else fix the name'
+        )
+
+
+def _did_you_mean(name: str, known: Sequence[str]) -> str:
+    """``"; did you mean 'x2'?"`` for the closest of ``known``, or ``""``."""
+    close = difflib.get_close_matches(name, list(known), n=1, cutoff=0.5)
+    return f"; did you mean {close[0]!r}?" if close else ""
 
 
 def _describe(node: ast.AST) -> str:

@@ -10,6 +10,7 @@ from drip_cert.errors import SpecError
 from drip_cert.model.mlp import MLP, load_mlp
 from drip_cert.model.onnx_io import read_onnx
 from drip_cert.model.safetensors_io import read_safetensors
+from drip_cert.numerics.user_files import input_file
 
 __all__ = ["NETWORK_FORMATS", "load_network"]
 
@@ -30,6 +31,8 @@ def load_network(
     metadata) one name for the hidden layers with an affine output, or one per layer; an ONNX
     graph carries its own activations, so giving one is an error.
     """
+    if Path(path).is_dir():  # a directory has no format to name: say what it is
+        input_file(path, "weights file", field=field)
     suffix = Path(path).suffix.lower()
     if suffix == ".onnx":
         if activation is not None:

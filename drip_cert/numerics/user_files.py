@@ -51,7 +51,9 @@ def input_file(
     where = str(p)
     if not p.exists():
         hint = _nearest_missing(p)
-        raise SpecError(f"{what} {where!r} does not exist{hint}", field=field)
+        if str(path).endswith(("/", os.sep)):  # `nodir/`: a directory was meant, a file is needed
+            hint += f"; and a file is needed here, not a directory: name the {what} itself"
+        raise SpecError(f"{what} {str(path)!r} does not exist{hint}", field=field)
     if p.is_dir():
         raise SpecError(f"{what} {where!r} is a directory: give the file inside it", field=field)
     if not p.is_file():

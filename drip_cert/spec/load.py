@@ -268,7 +268,9 @@ def spec_from_dict(doc: Mapping[str, Any], path: Path | None = None) -> Spec:
     for sec, val in doc.items():
         if sec not in SECTIONS:
             raise err(
-                f"unknown section [{sec}]; allowed: " + ", ".join(f"[{s}]" for s in SECTIONS), sec
+                f"unknown section [{sec}]{_did_you_mean(sec, SECTIONS)}; allowed: "
+                + ", ".join(f"[{s}]" for s in SECTIONS),
+                sec,
             )
         if not isinstance(val, dict):
             raise err(f"[{sec}] must be a table", sec)
@@ -276,13 +278,11 @@ def spec_from_dict(doc: Mapping[str, Any], path: Path | None = None) -> Spec:
         if keys is not None:
             extra = set(val) - set(keys)
             if extra:
-                key = sorted(extra)[0]
-                close = difflib.get_close_matches(key, list(keys), n=2, cutoff=0.6)
-                hint = f" Did you mean {' or '.join(close)}?" if close else ""
+                first = sorted(extra)[0]
                 raise err(
-                    f"unknown key(s) {sorted(extra)} in [{sec}].{hint} Allowed keys: "
-                    + ", ".join(keys),
-                    f"{sec}.{key}",
+                    f"unknown key(s) {sorted(extra)} in [{sec}]{_did_you_mean(first, keys)}; "
+                    "allowed: " + ", ".join(keys),
+                    f"{sec}.{first}",
                 )
     for sec, req in REQUIRED.items():
         if sec not in doc:
@@ -302,7 +302,7 @@ def spec_from_dict(doc: Mapping[str, Any], path: Path | None = None) -> Spec:
     reserved = set(FUNCTIONS) | set(CONSTANTS) | {"norm", tname}
     for s in state_names:
         if s in reserved:
-            raise err(f"state name {s!r} clashes with a reserved name", "system.states")
+            raise err(_reserved_clash("state", s, tname), "system.states")
     t = sp.Symbol(tname, real=True)
     states = tuple(sp.Symbol(s, real=True) for s in state_names)
     n = len(states)
@@ -314,9 +314,16 @@ def spec_from_dict(doc: Mapping[str, Any], path: Path | None = None) -> Spec:
             raise err("must be a table with kind, weights, inputs, outputs", fld)
         extra = set(bdef) - set(BLOCK_KEYS)
         if extra:
-            raise err(f"unknown key(s) {sorted(extra)}; allowed: {sorted(BLOCK_KEYS)}", fld)
-        if bname in reserved or bname in state_names:
-            raise err(f"block name {bname!r} clashes with a state or reserved name", fld)
+            first = sorted(extra)[0]
+            raise err(
+                f"unknown key(s) {sorted(extra)}{_did_you_mean(first, BLOCK_KEYS)}; allowed: "
+                f"{sorted(BLOCK_KEYS)}",
+                f"{fld}.{first}",
+            )
+        if bname in state_names:
+            raise err(f"block name {bname!r} is also a state name: rename the block", fld)
+        if bname in reserved:
+            raise err(_reserved_clash("block", bname, tname), fld)
         kind = bdef.get("kind", "mlp")
         if kind != "mlp":
             raise err(f'kind {kind!r} is not supported; use kind = "mlp"', f"{fld}.kind")
@@ -330,6 +337,14 @@ def spec_from_dict(doc: Mapping[str, Any], path: Path | None = None) -> Spec:
         wpath = Path(weights)
         if not wpath.is_absolute():
             wpath = base / wpath
+            if not wpath.exists() and Path(weights).is_file():  # relative to the cwd, not the spec
+                raise err(
+                    f"weights file {str(wpath)!r} does not exist: a path in a spec is relative "
+                    f"to the spec's directory {str(base)!r}, and {weights!r} is relative to the "
+                    f"current directory: write weights = {str(Path(weights).absolute())!r} or "
+                    "the path from the spec's directory",
+                    f"{fld}.weights",
+                )
         # optional: read from the network (checked against it when given)
         ins = _posint(bdef["inputs"], f"{fld}.inputs", err) if "inputs" in bdef else None
         outs = _posint(bdef["outputs"], f"{fld}.outputs", err) if "outputs" in bdef else None
@@ -351,8 +366,24 @@ def spec_from_dict(doc: Mapping[str, Any], path: Path | None = None) -> Spec:
     scalars[tname] = t
     vec_name = "x" if "x" not in state_names else None
 
+    raw_inputs = sysd.get("inputs")
+    input_names = (
+        [u for u in raw_inputs if isinstance(u, str)] if isinstance(raw_inputs, list) else []
+    )
+    input_hint = (
+        "it names an input; the dynamics are f + g u: write the input's coefficients into its "
+        "column of g, not into an expression"
+    )
+    time_hint = (
+        f"a policy is a function of the state only, u = pi(x); move a feed-forward term c({tname}) "
+        f"into [dynamics] f (add g * c({tname}) to f), where {tname!r} is allowed"
+    )
+
     def parse(text: Any, fld: str, allow_t: bool = True) -> sp.Expr:
         sc = scalars if allow_t else {k: v for k, v in scalars.items() if k != tname}
+        hints = {u: input_hint for u in input_names if u not in sc}
+        if not allow_t:
+            hints[tname] = time_hint
         return parse_expression(
             text,
             field=fld,
@@ -361,6 +392,7 @@ def spec_from_dict(doc: Mapping[str, Any], path: Path | None = None) -> Spec:
             vector=states,
             blocks=blocks,
             path=spath,
+            hints=hints,
         )
 
     def vector(val: Any, fld: str, length: int | None, allow_t: bool = True) -> list[sp.Expr]:
@@ -523,6 +555,31 @@ def spec_from_dict(doc: Mapping[str, Any], path: Path | None = None) -> Spec:
         expert_gain=expert_gain,
         structure=structure,
         structure_text=None if structure is None else tuple(str(e) for e in pol["structure"]),
+    )
+
+
+def _did_you_mean(name: str, known: Any) -> str:
+    """``" (did you mean 'support'?)"`` for the closest of ``known``, or ``""``."""
+    close = difflib.get_close_matches(name, sorted(known), n=1, cutoff=0.6)
+    return f" (did you mean {close[0]!r}?)" if close else ""
+
+
+def _reserved_clash(kind: str, name: str, tname: str) -> str:
+    """The message of a state or block named like a function, a constant or the time."""
+    if name == tname:
+        what = "the time variable ([system] time, default 't')"
+        fix = (
+            f'rename the {kind}, or name the time otherwise with [system] time = "tau"'
+            if kind == "state"
+            else f"rename the {kind}"
+        )
+    elif name in CONSTANTS:
+        what, fix = f"the constant {name}", f"rename the {kind}"
+    else:
+        what, fix = f"the function {name}()", f"rename the {kind}"
+    return (
+        f"{kind} name {name!r} clashes with the reserved name {name!r} ({what}): {fix}; "
+        f"reserved: {', '.join(sorted(set(FUNCTIONS) | set(CONSTANTS) | {'norm', tname}))}"
     )
 
 

@@ -43,22 +43,55 @@ import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from types import MappingProxyType
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 
 from drip_cert.numerics import stats as _stats
+from drip_cert.provenance import ValidationStatus
 
-HOLDS = "holds"  #: a finite bound was compared and not violated at the stated confidence
-VIOLATED = "violated"  #: the one-sided lower confidence bound exceeds the bound
-NOT_CHECKED = "not_checked"  #: nothing was compared (the check's ``reason`` says why)
-NOTHING_CHECKED = "nothing_checked"  #: report status: no check holds and none is violated
+# the statuses (drip_cert.provenance.ValidationStatus, str-valued: the JSON is unchanged)
+HOLDS = ValidationStatus.HOLDS
+VIOLATED = ValidationStatus.VIOLATED
+NOT_CHECKED = ValidationStatus.NOT_CHECKED
+NOTHING_CHECKED = ValidationStatus.NOTHING_CHECKED
+
+
+class GapEvidence(Protocol):
+    """What a validation reads of its evidence: a simulation
+    (:class:`~drip_cert.sim.result.SimResult`) or recorded data
+    (:class:`~drip_cert.validate.data.DataResult`) alike."""
+
+    @property
+    def n_paths_done(self) -> int: ...
+
+    @property
+    def times(self) -> np.ndarray: ...
+
+    def gap(self, name: str) -> _stats.GapStats: ...
+
+    def to_dict(self) -> dict[str, Any]: ...
+
+
+#: what to change in the spec for a number the certificate lacks (the reason of a not_checked)
+_HOW_TO_CERTIFY = {
+    "kappa": "set [l1drac] delta (the tail probability kappa is certified for, L1-DRAC (130a))",
+    "delta_L1": "set [l1drac] delta (a probability in (0, 1))",
+    "delta_TaSIL": "set [tasil] delta (a probability in (0, 1))",
+    "rho_TaSIL": "give the spec a learned policy ([policy] learned; drip-cert train writes one)",
+}
+
+
+def _not_certified(what: str) -> str:
+    """``no kappa certified: set [l1drac] delta ...`` (the fix, where one is known)."""
+    fix = _HOW_TO_CERTIFY.get(what)
+    return f"no {what} certified" + (f": {fix}" if fix else "")
 
 
 def _bound_problem(bound: float | None, what: str = "bound") -> str | None:
     """Why ``bound`` cannot be compared (``None`` when it can)."""
     if bound is None:
-        return f"no {what} certified"
+        return _not_certified(what)
     if math.isnan(bound):
         return f"{what} is NaN"
     if math.isinf(bound):
@@ -68,7 +101,7 @@ def _bound_problem(bound: float | None, what: str = "bound") -> str | None:
 
 def _delta_problem(delta: float | None, what: str = "delta") -> str | None:
     if delta is None:
-        return f"no {what} certified"
+        return _not_certified(what)
     if not 0.0 < delta < 1.0:
         return f"{what} = {delta!r} is not a probability in (0, 1): the claim is vacuous"
     return None
@@ -113,7 +146,7 @@ class EmpiricalCheck:
     confidence_low: float | None
     confidence_high: float | None
     level: float | None
-    status: str
+    status: ValidationStatus
     reason: str | None
     note: str
     extra: Mapping[str, Any] = field(default_factory=lambda: MappingProxyType({}))
@@ -546,7 +579,7 @@ def check_mean(
     )
 
 
-def overall_status(checks: Sequence[EmpiricalCheck]) -> str:
+def overall_status(checks: Sequence[EmpiricalCheck]) -> ValidationStatus:
     """``violated`` if any check is, else ``holds`` if at least one is, else ``nothing_checked``."""
     statuses = [c.status for c in checks]
     if VIOLATED in statuses:

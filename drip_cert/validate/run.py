@@ -17,11 +17,11 @@ import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from drip_cert.errors import SpecError
 from drip_cert.model.system import System
-from drip_cert.provenance import split_timings
+from drip_cert.provenance import ValidationStatus, split_timings
 from drip_cert.spec.load import SpecSource, as_spec
 from drip_cert.spec.settings import SimSettings
 from drip_cert.validate.checks import (
@@ -30,6 +30,7 @@ from drip_cert.validate.checks import (
     NOTHING_CHECKED,
     VIOLATED,
     EmpiricalCheck,
+    GapEvidence,
     checks_from_result,
     overall_status,
     uncertainty_gap_name,
@@ -43,6 +44,10 @@ from drip_cert.validate.scenarios import (
     has_known_diffusion,
     run_scenarios,
 )
+
+if TYPE_CHECKING:
+    from drip_cert.bounds.certificate import Certificate
+    from drip_cert.sim.result import SimResult
 
 __all__ = ["VALIDATION_SCHEMA_VERSION", "ShortHorizonRun", "ValidationReport", "validate"]
 
@@ -63,7 +68,7 @@ class ShortHorizonRun:
     note: str
 
     @property
-    def status(self) -> str:
+    def status(self) -> ValidationStatus:
         """``violated`` / ``holds`` / ``nothing_checked`` over its checks."""
         return overall_status(self.checks)
 
@@ -84,12 +89,13 @@ class ValidationReport:
     ``status`` is ``violated`` when a check (of the main or the short run) is violated, else
     ``holds`` when at least one holds, else ``nothing_checked``; ``holds`` is
     ``status == "holds"``. ``result`` is the :class:`~drip_cert.sim.result.SimResult` (not part
-    of :meth:`to_dict`; save it with ``result.save``).
+    of :meth:`to_dict`; save it with ``result.save``), or the
+    :class:`~drip_cert.validate.data.DataResult` of recorded data.
     """
 
     checks: tuple[EmpiricalCheck, ...]
     short_horizon: ShortHorizonRun | None
-    certificate: Any
+    certificate: Certificate
     empirical: Mapping[str, Any]
     at_certified_parameters: bool
     horizon: float
@@ -97,7 +103,7 @@ class ValidationReport:
     l1_parameters: Mapping[str, float]
     diverged_fraction: Mapping[str, float]
     notes: tuple[str, ...]
-    result: Any = field(repr=False, compare=False)
+    result: GapEvidence = field(repr=False, compare=False)
 
     @property
     def all_checks(self) -> tuple[EmpiricalCheck, ...]:
@@ -105,12 +111,29 @@ class ValidationReport:
         return self.checks + (self.short_horizon.checks if self.short_horizon else ())
 
     @property
-    def status(self) -> str:
+    def status(self) -> ValidationStatus:
         return overall_status(self.all_checks)
 
     @property
     def holds(self) -> bool:
         return self.status == HOLDS
+
+    @property
+    def simulation(self) -> SimResult:
+        """``result`` of a simulated validation (a :class:`SpecError` for recorded data, which
+        have no simulation to save or plot)."""
+        from drip_cert.sim.result import SimResult  # jax: keep off the API's import path
+
+        if not isinstance(self.result, SimResult):
+            raise SpecError("this validation checked recorded data: it has no simulation")
+        return self.result
+
+    @property
+    def unfingerprinted_data(self) -> bool:
+        """Whether this validates recorded data that carry no fingerprint (accepted unverified
+        by ``accept_unfingerprinted``; a simulation is never unfingerprinted)."""
+        data = getattr(self.result, "data", None)  # DataResult.data: the recorded data
+        return data is not None and data.fingerprint is None
 
     @property
     def counts(self) -> dict[str, int]:

@@ -10,6 +10,7 @@ from typing import Any
 import numpy as np
 
 from drip_cert.model.system import System
+from drip_cert.progress import bars_enabled
 
 MAX_STEPS = 200_000  #: largest number of Euler steps per path accepted for a certified-T_s run
 SHORT_STEPS = 2_000  #: steps of the short-horizon run at the certified T_s (dt = T_s)
@@ -112,7 +113,7 @@ def run_scenarios(
         cfg,
         x0_sampler(box, theta),
         run_dir=run_dir,
-        progress=progress,
+        progress=bars_enabled(progress),  # a bar redrawn in place: on a terminal only
         backend=backend,
     )
 

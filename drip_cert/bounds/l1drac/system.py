@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -52,6 +52,9 @@ class L1Section:
     #: term of ``rho`` (docs/math/contraction.md Proposition 6.6)
     rho_sde: Quantity | None = None
     decomposition: L1Decomposition | None = None  #: rho_L1 term by term (decomposition.py)
+    #: the integer and boolean constants of :class:`L1Constants` (``p_star``, ``m``, ``lip_f``):
+    #: in ``constants_used`` too, so that it is a complete ``design-l1`` [constants] table
+    discrete: Mapping[str, int | bool] = field(default_factory=dict)
 
     @property
     def feasible(self) -> bool:
@@ -62,6 +65,7 @@ class L1Section:
         if self.design is None:
             out.update(feasible=False, reason=self.error)
         out["constants_used"] = {k: q.to_dict() for k, q in self.constants.items()}
+        out["constants_used"].update(self.discrete)
         out["rho_sde"] = None if self.rho_sde is None else self.rho_sde.to_dict()
         out["tradeoff"] = [
             {"rho_a": r.rho_a, "Ts_max": r.Ts_max, "rho": r.rho} for r in self.tradeoff
@@ -171,6 +175,7 @@ def l1_section(
         if name in q:
             q[name] = Quantity(name, v, How.GIVEN, q[name].source, "given in [constants]")
     lip_f = st.lip_f if st.lip_f is not None else math.isfinite(q["L_f"].value)
+    discrete = {"p_star": st.p_star or st.p, "m": s.m, "lip_f": bool(lip_f)}
     bad = [k for k, v in q.items() if not math.isfinite(v.value) and not (k == "L_f" and not lip_f)]
     if bad:
         return L1Section(
@@ -180,6 +185,7 @@ def l1_section(
             + ", ".join(f"{k} ({q[k].note})" for k in bad)
             + "; give them in [constants]",
             rho_sde=cl.rho_sde,
+            discrete=discrete,
         )
     # the [constants] mapping of L1Constants.from_mapping: reals, the ints p_star, m, the bool lip_f
     values: dict[str, Any] = {k: v.value for k, v in q.items()}
@@ -189,7 +195,7 @@ def l1_section(
     try:
         consts = L1Constants.from_mapping(values)
     except AssumptionViolation as exc:
-        return L1Section(q, None, str(exc), rho_sde=cl.rho_sde)
+        return L1Section(q, None, str(exc), rho_sde=cl.rho_sde, discrete=discrete)
     req = DesignRequest(
         p=st.p,
         lambda_s=st.lambda_s,
@@ -207,4 +213,11 @@ def l1_section(
     # a feasible design has omega and lambda_s (condition (24) was verified)
     if d.feasible and d.omega is not None and d.lambda_s is not None:
         rows = tradeoff_table(consts, d.p, d.omega, d.lambda_s)
-    return L1Section(q, d, tradeoff=rows, rho_sde=cl.rho_sde, decomposition=decompose(consts, d))
+    return L1Section(
+        q,
+        d,
+        tradeoff=rows,
+        rho_sde=cl.rho_sde,
+        decomposition=decompose(consts, d),
+        discrete=discrete,
+    )
