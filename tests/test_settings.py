@@ -211,7 +211,6 @@ def test_absent_tables_give_the_defaults(tmp_path):
     assert st == Settings(present=frozenset())
     assert st.contraction == ContractionSettings() and st.simulation == SimSettings()
     assert st.tasil == TasilSettings() and st.l1drac == L1Settings()
-    assert spec.table("tasil") == {}
 
 
 def test_written_values_are_typed(tmp_path):
@@ -242,7 +241,11 @@ def test_written_values_are_typed(tmp_path):
     assert isinstance(st.simulation.dt, float) and st.simulation.paths == 7
     assert dict(st.constants.values) == {"L_mu": 0.0, "lambda": 2.0}
     assert st.present == {"contraction", "l1drac", "tasil", "simulation", "constants"}
-    assert not hasattr(spec, "tables")  # one source of truth: the settings
+    import dataclasses
+
+    # one source of truth: the settings (raw tables are a construction input, never stored)
+    assert "tables" not in {f.name for f in dataclasses.fields(spec)}
+    assert not hasattr(spec, "table")
 
 
 def test_spec_rebuilt_from_tables_and_with_system(tmp_path):
