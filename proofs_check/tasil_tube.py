@@ -1,7 +1,7 @@
 """The TaSIL sure bound on a finite horizon along the expert's tube (docs/math/tasil.md sections
 3.7, 3.9, 3.10; ``drip_cert.bounds.tasil.tube``, ``drip_cert.analysis.learned_loop``).
 
-Four claims, each falsified on random instances and attained on tight ones (one in three), so that
+Five claims, each falsified on random instances and attained on tight ones (one in three), so that
 a bound 1 % smaller (``factor = 0.99``) fails:
 
 * ``tasil.comparison_finite_horizon`` (3.7): ``max_{t <= T} gap <= ||g||_2 h0 (1 - e^{-lambda_IL T})
@@ -13,6 +13,11 @@ a bound 1 % smaller (``factor = 0.99``) fails:
 * ``tasil.tube_gap`` (3.10b): the grid recursion of
   :func:`~drip_cert.bounds.tasil.tube.time_resolved_gap_up` with ``H_k`` the sup of
   ``||Delta(x*)||`` on ``[t_k, t_{k+1}]`` bounds the gap at every time; tight as the first claim.
+* ``tasil.box_tube`` (3.11a): for an expert loop with ``mu_inf(W J W^{-1}) <= -lambda_W``,
+  ``||W (x*(t, xi) - c)||_inf <= e^{-lambda_W t} ||W (xi - c)||_inf + ||W F*(c)||_inf (1 -
+  e^{-lambda_W t}) / lambda_W``. Random: ``F*(x) = A x + a tanh(V x) + v`` with the rate
+  ``-(mu_W(A) + |a| ||W V W^{-1}||_inf)``; tight: ``F*(x) = -lambda (x - c) + beta e_i``,
+  ``xi - c = alpha e_i`` (alpha, beta >= 0).
 * ``tasil.centred_form`` (3.9): ``sup_B ||Delta|| <= || |Delta(c)| + |[J](B)| r ||``, ``[J]`` the
   box's interval Jacobian. Random: ``Delta = W2 tanh(W1 x + b) + K x`` (``[J]`` from
   ``enclose_jacobian_centred``), sup by dense sampling and the corners; tight: ``Delta(x) = u (a +
@@ -37,6 +42,7 @@ LABEL_FH = "docs/math/tasil.md Proposition 3.7 (finite-horizon comparison bound)
 LABEL_R = "docs/math/tasil.md Proposition 3.10 (a): the expert's contraction tube"
 LABEL_G = "docs/math/tasil.md Proposition 3.10 (b): the time-resolved gap bound on a grid"
 LABEL_C = "docs/math/tasil.md Proposition 3.9: the centred form over a box"
+LABEL_B = "docs/math/tasil.md Proposition 3.11 (a): the expert's box tube in a weighted inf-norm"
 ODE_RTOL = 1e-11  # solve_ivp relative tolerance
 ODE_ATOL = 1e-13  # solve_ivp absolute tolerance
 GRID = 2001  # points where sups along a trajectory and the gap are read off the dense output
@@ -257,4 +263,75 @@ def check_centred_form(ctx: Context, factor: float = 1.0) -> CheckResult:
         residual=worst - 1.0,
         detail=f"{n_inst} boxes (1/3 tight): max sampled sup / centred form = {worst:.8f} (tight "
         f"{worst_tight:.8f})",
+    )
+
+
+def _mu_w(M: np.ndarray, w: np.ndarray) -> float:
+    """``mu_inf(W M W^{-1}) = max_i (M_ii + sum_{j != i} |M_ij| w_i / w_j)``."""
+    Mw = M * (w[:, None] / w[None, :])
+    d = np.diag(Mw)
+    return float(np.max(d + np.sum(np.abs(Mw), axis=1) - np.abs(d)))
+
+
+@register("tasil.box_tube", LABEL_B)
+def check_box_tube(ctx: Context, factor: float = 1.0) -> CheckResult:
+    """||W (x*(t, xi) - c)||_inf <= factor * r_W(t) of (3.11a) at every grid time."""
+    name = "tasil.box_tube"
+    rng = ctx.rng
+    worst = worst_tight = 0.0
+    n_inst = ctx.count(45, 9)
+    for k in range(n_inst):
+        tight = k % 3 == 0
+        n = int(rng.integers(2, 4))
+        w = rng.uniform(0.3, 3.0, size=n)
+        c = rng.normal(size=n)
+        lam = float(rng.uniform(0.3, 2.0))
+        if tight:
+            i = int(rng.integers(n))
+            e = np.zeros(n)
+            e[i] = 1.0
+            xi = c + float(rng.uniform(0.1, 2.0)) * e
+            v = float(rng.uniform(0.0, 2.0)) * e
+
+            def F(x, lam=lam, c=c, v=v):
+                return -lam * (x - c) + v
+
+            rate = lam
+        else:
+            xi = c + rng.normal(size=n) * 2.0
+            v = rng.normal(size=n)
+            A = -lam * np.eye(n) + 0.2 * rng.normal(size=(n, n))
+            V = rng.normal(size=(n, n))
+            Vw = V * (w[:, None] / w[None, :])
+            room = -_mu_w(A, w)
+            if room <= 0.1:
+                A = A - (0.1 - room + 0.1) * np.eye(n)
+                room = -_mu_w(A, w)
+            # the tanh term's Jacobian a diag(sech^2) V has weighted inf-norm <= |a| ||W V W^-1||
+            a = float(rng.uniform(-0.9, 0.9)) * room / float(np.max(np.sum(np.abs(Vw), axis=1)))
+            rate = room - abs(a) * float(np.max(np.sum(np.abs(Vw), axis=1)))
+
+            def F(x, A=A, a=a, V=V, v=v):
+                return A @ x + a * np.tanh(V @ x) + v
+
+        T = 3.0 / rate
+        sol = solve_ivp(
+            lambda _t, x, F=F: F(x), (0.0, T), xi, method="DOP853",
+            rtol=ODE_RTOL, atol=ODE_ATOL, dense_output=True,
+        )  # fmt: skip
+        ts = np.linspace(0.0, T, 200)
+        dist = np.max(np.abs(sol.sol(ts) - c[:, None]) * w[:, None], axis=0)
+        R0 = float(np.max(np.abs(xi - c) * w))
+        phi = float(np.max(np.abs(F(c)) * w))
+        r = factor * tube_radii_up(R0, phi, rate, ts)
+        ratio = float(np.max(dist / r))
+        worst = max(worst, ratio)
+        worst_tight = max(worst_tight, ratio) if tight else worst_tight
+    return result(
+        name,
+        LABEL_B,
+        holds=bool(worst <= 1.0 + RATIO_TOL),
+        residual=worst - 1.0,
+        detail=f"{n_inst} instances (1/3 tight): max ||W (x* - c)||_inf / r_W(t) = {worst:.8f} "
+        f"(tight {worst_tight:.8f})",
     )

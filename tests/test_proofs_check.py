@@ -179,11 +179,12 @@ ATTAINED = 1e-6
         ("tasil.tube_radius", "check_tube_radius"),
         ("tasil.tube_gap", "check_tube_gap"),
         ("tasil.centred_form", "check_centred_form"),
+        ("tasil.box_tube", "check_box_tube"),
     ],
 )
 def test_tube_checks_hold_attain_and_fail_on_a_smaller_bound(name, fn):
-    """docs/math/tasil.md 3.7 (finite horizon), 3.9, 3.10: each bound holds, is attained on the
-    tight instances, and fails when taken 0.99 times too small."""
+    """docs/math/tasil.md 3.7 (finite horizon), 3.9, 3.10, 3.11: each bound holds, is attained on
+    the tight instances, and fails when taken 0.99 times too small."""
     import proofs_check.tasil_tube as tt
 
     check = getattr(tt, fn)
