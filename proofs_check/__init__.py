@@ -26,6 +26,7 @@ MODULES = (
     "proofs_check.paper_text",
     "proofs_check.invariance",
     "proofs_check.sde_moments",
+    "proofs_check.l1drac_exit",
     "proofs_check.coordinates",
     "proofs_check.slope_lmi",
     "proofs_check.implementation",

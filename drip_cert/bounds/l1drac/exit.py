@@ -1,0 +1,164 @@
+"""Box-only learned loops: the probability that the true process leaves the box (exit bound).
+
+Mathematics: ``docs/math/l1drac.md`` section 11. When the learned closed loop ``F`` contracts
+only on a box ``R``, L1-DRAC's Theorem 4.1 is applied to a globally contracting extension
+``F~(x) = F(P x) - k (x - P x)`` (Proposition 11.1, (11.1a)); the true process equals the
+extended one until it leaves ``R`` (Proposition 11.2); an exit is a deviation of at least the
+room ``r`` from the nominal trajectory (Lemma 11.3), whose probability the grid union (11.4)
+bounds from fixed-time moments, with the inputs (11.5) of the L1-DRAC closed loop.
+
+Every function rounds outward (:mod:`drip_cert.numerics.rounding`, Arb for ``exp``): the
+returned numbers are upper bounds of the closed forms they name. Not yet called by the
+certificate (section 11.7 says what is missing).
+
+Public surface
+--------------
+* :func:`extension_gain` -- the slope ``k`` of (11.1a).
+* :func:`extension_constants` -- ``(k, L_f~, Delta_f~)`` of Proposition 11.1.
+* :func:`l1drac_exit_inputs` -- ``(B, S)`` of (11.5).
+* :func:`grid_exit_bound` -- the right side of (11.4), minimised over a finite grid of ``N, a``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from flint import arb
+
+from drip_cert.numerics.rounding import (
+    add_up,
+    arb_hi,
+    div_up,
+    mul_up,
+    sqrt_up,
+    sub_down,
+)
+
+__all__ = [
+    "ExitBound",
+    "extension_constants",
+    "extension_gain",
+    "grid_exit_bound",
+    "l1drac_exit_inputs",
+]
+
+#: Splits ``a = s r`` of the room tried by :func:`grid_exit_bound` (any split is valid).
+SPLITS = tuple(i / 20 for i in range(1, 20))
+
+
+def _pow_up(x: float, q: int) -> float:
+    """Upper bound of ``x**q`` for ``x >= 0`` and an integer ``q >= 1`` (repeated rounded up)."""
+    out = 1.0
+    for _ in range(q):
+        out = mul_up(out, x)
+    return out
+
+
+def extension_gain(lam: float, lam_prime: float, lip: float) -> float:
+    """Slope ``k >= lam' + L^2 / (4 (lam - lam'))`` of the extension (11.1a), rounded up.
+
+    Parameters
+    ----------
+    lam : float
+        Rate proved on the box: ``mu_2(dF) <= -lam`` there, ``lam > 0``.
+    lam_prime : float
+        Global rate wanted for the extension, ``0 < lam_prime < lam``.
+    lip : float
+        ``L >= sup_R ||dF||_2``.
+    """
+    if not (0.0 < lam_prime < lam) or not lip >= 0.0:
+        raise ValueError(f"need 0 < lam' < lam and L >= 0, got {lam_prime}, {lam}, {lip}")
+    gap = sub_down(lam, lam_prime)
+    if not gap > 0.0:
+        raise ValueError(f"lam - lam' rounds to {gap}; take a smaller lam'")
+    return add_up(lam_prime, div_up(mul_up(lip, lip), 4.0 * gap))
+
+
+def extension_constants(
+    lam: float, lam_prime: float, lip: float, sup_f: float, d0: float
+) -> tuple[float, float, float]:
+    """``(k, L_f~, Delta_f~)`` of Proposition 11.1 (ii)-(iii), each rounded up.
+
+    ``sup_f >= sup_R ||F||`` and ``d0 >= ||P 0||`` (distance from the origin to the box);
+    ``L_f~ = L + k`` and ``Delta_f~ = sqrt((M + k d0)^2 + k^2)``.
+    """
+    k = extension_gain(lam, lam_prime, lip)
+    lf = add_up(lip, k)
+    c0 = add_up(sup_f, mul_up(k, d0))
+    df = sqrt_up(add_up(mul_up(c0, c0), mul_up(k, k)))
+    return k, lf, df
+
+
+def l1drac_exit_inputs(
+    *,
+    rho: float,
+    r_x: float,
+    sup_f: float,
+    delta_f: float,
+    delta_mu: float,
+    delta_sigma: float,
+    delta_p: float,
+    delta_g: float,
+    delta_theta: float,
+    lambda_s: float,
+    t_s: float,
+    p: int,
+) -> tuple[float, float]:
+    """``(B, S)`` of Proposition 11.5, eq. (11.5), rounded up.
+
+    ``m = R_x + rho``; ``S = Delta_p + Delta_sigma (1 + m)^{1/2}``;
+    ``B_U = Delta_Theta (e^{-lambda_s T_s} Delta_mu (1 + m) + sqrt(p (2p - 1) / T_s) S)``;
+    ``B = (Delta_f~ + Delta_mu)(1 + m) + Delta_g B_U + M``.
+    """
+    one_m = add_up(1.0, add_up(r_x, rho))
+    s = add_up(delta_p, mul_up(delta_sigma, sqrt_up(one_m)))
+    decay = arb_hi((-(arb(lambda_s) * arb(t_s))).exp())
+    noise = mul_up(sqrt_up(div_up(float(p * (2 * p - 1)), t_s)), s)
+    b_u = mul_up(delta_theta, add_up(mul_up(decay, mul_up(delta_mu, one_m)), noise))
+    b = add_up(
+        add_up(mul_up(add_up(delta_f, delta_mu), one_m), mul_up(delta_g, b_u)),
+        sup_f,
+    )
+    return b, s
+
+
+@dataclass(frozen=True)
+class ExitBound:
+    """The right side of (11.4) at its best grid ``n`` and split ``a`` (``eta = room - a``)."""
+
+    delta: float
+    n: int
+    a: float
+
+
+def grid_exit_bound(
+    *, rho: float, b: float, s: float, q: int, room: float, horizon: float, n_max: int = 10**7
+) -> ExitBound:
+    """``min_{N, a} N (rho/a)^q + N (omega_h/eta)^q`` of Lemma 11.4, eq. (11.4), rounded up.
+
+    ``omega_h = h B + c_q sqrt(h) S`` with ``h = T/N`` and
+    ``c_q = q/(q-1) sqrt(q (q-1)/2)``. ``N`` runs over powers of 2 up to ``n_max`` and ``a``
+    over :data:`SPLITS` of the room; every pair gives a valid bound, the smallest is returned
+    (at most 1 is meaningful; larger values are returned as computed).
+    """
+    if q < 2 or not (room > 0.0 and horizon > 0.0):
+        raise ValueError(f"need q >= 2, room > 0, T > 0; got {q}, {room}, {horizon}")
+    cq = mul_up(div_up(float(q), float(q - 1)), sqrt_up(div_up(float(q * (q - 1)), 2.0)))
+    best = ExitBound(delta=math.inf, n=1, a=room / 2)
+    n = 1
+    while n <= n_max:
+        h = div_up(horizon, float(n))
+        omega = add_up(mul_up(h, b), mul_up(cq, mul_up(sqrt_up(h), s)))
+        for frac in SPLITS:
+            a = frac * room
+            eta = sub_down(room, a)
+            if not (a > 0.0 and eta > 0.0):
+                continue
+            t1 = _pow_up(div_up(rho, a), q)
+            t2 = _pow_up(div_up(omega, eta), q)
+            d = mul_up(float(n), add_up(t1, t2))
+            if d < best.delta:
+                best = ExitBound(delta=d, n=n, a=a)
+        n *= 2
+    return best
