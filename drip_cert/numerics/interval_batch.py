@@ -70,40 +70,35 @@ SIN_MAX_ABS = 1e6  #: above this ``|x|`` the extremum test is skipped: ``[-1, 1]
 
 
 def _libm(fn: Callable[[np.ndarray], np.ndarray], x: np.ndarray) -> Pair:
-    with np.errstate(all="ignore"):
-        return widen_np(fn(x), LIBM_REL)
+    return widen_np(fn(x), LIBM_REL)
 
 
 def _mul(alo, ahi, blo, bhi) -> Pair:
     """``a * b`` with ``0 * inf = 0`` (an operand's NaN stays NaN)."""
-    with np.errstate(all="ignore"):
-        ps = [alo * blo, alo * bhi, ahi * blo, ahi * bhi]
-    bad = np.isnan(alo) | np.isnan(ahi) | np.isnan(blo) | np.isnan(bhi)
-    ps = [np.where(np.isnan(p) & ~bad, 0.0, p) for p in ps]
-    lo = np.minimum(np.minimum(ps[0], ps[1]), np.minimum(ps[2], ps[3]))
-    hi = np.maximum(np.maximum(ps[0], ps[1]), np.maximum(ps[2], ps[3]))
-    return down_np(lo), up_np(hi)
+    a = np.stack([alo, alo, ahi, ahi])
+    b = np.stack([blo, bhi, blo, bhi])
+    ps = a * b
+    if np.isnan(ps).any():  # 0 * inf, or a NaN operand
+        ps = np.where(np.isnan(ps) & ~np.isnan(a) & ~np.isnan(b), 0.0, ps)
+    return down_np(ps.min(axis=0)), up_np(ps.max(axis=0))
 
 
 def _add(alo, ahi, blo, bhi) -> Pair:
-    with np.errstate(invalid="ignore"):
-        return add_down_np(alo, blo), add_up_np(ahi, bhi)
+    return add_down_np(alo, blo), add_up_np(ahi, bhi)
 
 
 def _recip(lo, hi) -> Pair:
     zero = (lo <= 0.0) & (hi >= 0.0)
-    with np.errstate(all="ignore"):
-        rlo = down_np(1.0 / hi)
-        rhi = up_np(1.0 / lo)
+    rlo = down_np(1.0 / hi)
+    rhi = up_np(1.0 / lo)
     return np.where(zero, -np.inf, rlo), np.where(zero, np.inf, rhi)
 
 
 def _pow_mag(a: np.ndarray, k: int, rnd) -> np.ndarray:
     """``a^k`` for ``a >= 0`` by repeated multiplication, each product rounded by ``rnd``."""
     out = a
-    with np.errstate(over="ignore"):
-        for _ in range(k - 1):
-            out = rnd(out * a)
+    for _ in range(k - 1):
+        out = rnd(out * a)
     return out
 
 
@@ -126,9 +121,8 @@ def _ipow(lo, hi, k: int) -> Pair:
 
 def _sqrt(lo, hi) -> Pair:
     bad = lo < 0.0
-    with np.errstate(invalid="ignore"):
-        slo = np.maximum(down_np(np.sqrt(np.maximum(lo, 0.0))), 0.0)
-        shi = up_np(np.sqrt(hi))
+    slo = np.maximum(down_np(np.sqrt(np.maximum(lo, 0.0))), 0.0)
+    shi = up_np(np.sqrt(hi))
     return np.where(bad, np.nan, slo), np.where(bad, np.nan, shi)
 
 
@@ -147,9 +141,8 @@ def _exp(lo, hi) -> Pair:
 
 def _log(lo, hi) -> Pair:
     bad = lo <= 0.0  # the scalar evaluator refuses a log reaching 0 (strict domain)
-    with np.errstate(all="ignore"):
-        llo = _libm(np.log, np.where(bad, 1.0, lo))[0]
-        lhi = _libm(np.log, np.where(bad, 1.0, hi))[1]
+    llo = _libm(np.log, np.where(bad, 1.0, lo))[0]
+    lhi = _libm(np.log, np.where(bad, 1.0, hi))[1]
     return np.where(bad, np.nan, llo), np.where(bad, np.nan, lhi)
 
 
@@ -170,9 +163,8 @@ def _cosh(lo, hi) -> Pair:
 def _sech(lo, hi) -> Pair:
     """``1 / cosh``: libm's error and one division, so widened by twice the libm budget."""
     alo, ahi = _abs(lo, hi)
-    with np.errstate(all="ignore"):
-        vlo = widen_np(1.0 / np.cosh(ahi), 2.0 * LIBM_REL)[0]
-        vhi = widen_np(1.0 / np.cosh(alo), 2.0 * LIBM_REL)[1]
+    vlo = widen_np(1.0 / np.cosh(ahi), 2.0 * LIBM_REL)[0]
+    vhi = widen_np(1.0 / np.cosh(alo), 2.0 * LIBM_REL)[1]
     return _clip((vlo, vhi), 0.0, 1.0)
 
 
@@ -189,12 +181,9 @@ def _periodic(fn, max_at: float, min_at: float) -> Callable[[np.ndarray, np.ndar
         a_lo, a_hi = _libm(fn, lo)
         b_lo, b_hi = _libm(fn, hi)
         rlo, rhi = np.minimum(a_lo, b_lo), np.maximum(a_hi, b_hi)
-        with np.errstate(invalid="ignore"):
-            full = ~((hi - lo) < SIN_FULL_WIDTH) | ~(
-                np.maximum(np.abs(lo), np.abs(hi)) < SIN_MAX_ABS
-            )
-            rhi = np.where(full | _reaches(lo, hi, max_at), 1.0, rhi)
-            rlo = np.where(full | _reaches(lo, hi, min_at), -1.0, rlo)
+        full = ~((hi - lo) < SIN_FULL_WIDTH) | ~(np.maximum(np.abs(lo), np.abs(hi)) < SIN_MAX_ABS)
+        rhi = np.where(full | _reaches(lo, hi, max_at), 1.0, rhi)
+        rlo = np.where(full | _reaches(lo, hi, min_at), -1.0, rlo)
         return _clip((rlo, rhi), -1.0, 1.0)
 
     return op
@@ -299,6 +288,16 @@ def compile_batch(expr: sp.Expr | float, variables: Sequence[sp.Symbol]) -> _BFn
     UnsupportedExpression
         A node has no batched form here (use the scalar evaluator).
     """
+    fn = _compile_raw(expr, variables)
+
+    def call(boxes: np.ndarray) -> Pair:
+        with np.errstate(all="ignore"):  # inf - inf and the like: NaN, read as no information
+            return fn(np.asarray(boxes, dtype=float))
+
+    return call
+
+
+def _compile_raw(expr: sp.Expr | float, variables: Sequence[sp.Symbol]) -> _BFn:
     index = {s: i for i, s in enumerate(variables)}
     return _compile(cancellation_free(sp.sympify(expr)), index)
 
@@ -324,12 +323,12 @@ class BatchEnclosure:
     def __init__(self, expr: sp.Expr, variables: Sequence[sp.Symbol]) -> None:
         expr = sp.sympify(expr)
         self.variables = tuple(variables)
-        self._natural = compile_batch(expr, variables)
+        self._natural = _compile_raw(expr, variables)
         self._grads: list[_BFn | None] | None = None
         if expr.free_symbols & set(variables) and is_smooth(expr):
             try:
                 self._grads = [
-                    compile_batch(sp.diff(expr, v), variables) if expr.has(v) else None
+                    _compile_raw(sp.diff(expr, v), variables) if expr.has(v) else None
                     for v in variables
                 ]
             except UnsupportedExpression:
@@ -337,7 +336,10 @@ class BatchEnclosure:
 
     def __call__(self, boxes: np.ndarray) -> Pair:
         """``(lo, hi)``, each ``(K,)``, for the boxes ``(K, d, 2)`` (NaN: no information)."""
-        boxes = np.asarray(boxes, dtype=float)
+        with np.errstate(all="ignore"):  # inf - inf and the like: NaN, read as no information
+            return self._enclose(np.asarray(boxes, dtype=float))
+
+    def _enclose(self, boxes: np.ndarray) -> Pair:
         lo, hi = self._natural(boxes)
         if self._grads is None:
             return _nan_both(lo, hi)
