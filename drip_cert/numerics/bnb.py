@@ -13,6 +13,12 @@ stopped search (budget, time, a box too thin to split) returns that same bound: 
 wrong. A NaN from ``upper`` is read as ``+inf`` (no information). The sampled values serve only
 to stop early and to report a witness; they are estimates of the maximum from below.
 
+Batched use: with ``upper_many`` (bounds of many sub-boxes per call, e.g.
+:class:`~drip_cert.numerics.interval_batch.BatchEnclosure`) and ``batch > 1`` each round splits
+up to ``batch`` of the sub-boxes with the largest bounds (the round size doubling from 1) and
+bounds all children in one call; ``batch = 1`` is the one-box-at-a-time search, bit for bit. The
+heap covers the box in both, so the bound is sound for every ``batch``.
+
 Users: :func:`drip_cert.analysis.contraction.contraction_rate` (``max mu_2`` of an interval
 Jacobian, docs/math/contraction.md section 3.4) and :mod:`drip_cert.analysis.expr_sup` (the
 one-dimensional and small-box suprema of the growth constants, docs/math/l1drac.md section 2).
