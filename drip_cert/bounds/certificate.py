@@ -580,6 +580,11 @@ def certify(
                 continue
             if m.metric_rate > 0 and (not eu.holds or m.metric_rate > eu.rate):
                 metrics.append(m)
+    if demonstrations is None and spec.system.learned is not None:
+        # drawn once for every candidate coordinate system (each maps the same draw to z)
+        from drip_cert.learn.imitation import demonstration_set  # jax: keep off the API's path
+
+        demonstrations = demonstration_set(spec.system, spec.settings.tasil)
     in_z = []
     for m in metrics:
         change = coordinates_from_metric(

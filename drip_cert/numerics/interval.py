@@ -52,7 +52,9 @@ __all__ = [
     "cancellation_free",
     "EncloseCallback",
     "compile_enclosure",
+    "enclose_constant",
     "enclose_expr",
+    "is_smooth",
     "MatrixEnclosure",
     "interval_add",
     "interval_mul",
@@ -574,8 +576,16 @@ def enclose_expr(
     return compile_enclosure(expr, variables, enclose)(ivs)
 
 
-def _is_smooth(expr: sp.Expr) -> bool:
+def is_smooth(expr: sp.Expr) -> bool:
+    """Whether ``expr`` has no head with a discontinuous derivative (``Abs sign Heaviside Max
+    Min``): the mean-value form applies to it."""
     return not any(expr.has(h) for h in _NONSMOOTH)
+
+
+def enclose_constant(expr: sp.Expr) -> Interval:
+    """Rigorous enclosure of a constant expression (no symbols): its own tree in interval
+    arithmetic, Arb at the leaves and at every elementary function."""
+    return _const_tree(sp.sympify(expr))
 
 
 class MatrixEnclosure:
@@ -613,7 +623,7 @@ class MatrixEnclosure:
             e = sp.sympify(e)
             self._natural.append(compile_enclosure(e, variables, enclose))
             mv = None
-            if mean_value and e.free_symbols & set(variables) and _is_smooth(e):
+            if mean_value and e.free_symbols & set(variables) and is_smooth(e):
                 try:
                     grads = [
                         compile_enclosure(sp.diff(e, v), variables, enclose) if e.has(v) else None
