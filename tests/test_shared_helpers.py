@@ -67,3 +67,15 @@ def test_jsonable_floats_as_json_float(value, want):
     got = jsonable({"a": [value], "b": np.array([value])})
     assert got == {"a": [want], "b": [want]}
     assert all(type(v) is type(want) for v in (*got["a"], *got["b"]))
+
+
+def test_design_table_keys():
+    """A ``design-l1`` file's ``[design]`` keys: ``p``, the design keys a spec's ``[l1drac]``
+    shares (read by the same reader, with the same descriptions) and the omega interval."""
+    from drip_cert.bounds.l1drac.toml import DESIGN_KEYS
+    from drip_cert.spec.settings import L1Settings
+
+    shared = ["p", "lambda_s", "omega", "Ts", "rho_r", "rho_a", "delta", "objective"]
+    shared += ["rho_budget", "front"]
+    assert list(DESIGN_KEYS) == [*shared, "omega_min", "omega_max"]
+    assert all(DESIGN_KEYS[k] == L1Settings.KEYS[k] for k in shared)
