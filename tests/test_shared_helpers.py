@@ -79,3 +79,29 @@ def test_design_table_keys():
     shared += ["rho_budget", "front"]
     assert list(DESIGN_KEYS) == [*shared, "omega_min", "omega_max"]
     assert all(DESIGN_KEYS[k] == L1Settings.KEYS[k] for k in shared)
+
+
+@pytest.mark.parametrize(
+    ("spec", "smooth", "onnx"),
+    [
+        ("leaky_relu(0.2)", False, {"alpha": 0.2}),
+        ("leaky_relu(1.0)", True, {"alpha": 1.0}),
+        ("elu(0.5)", False, {"alpha": 0.5}),
+        ("elu", True, {"alpha": 1.0}),
+        ("relu", False, {}),
+    ],
+)
+def test_one_slope_activations(spec, smooth, onnx):
+    """leaky_relu and elu share their ``alpha`` handling: the spec string parses back to an
+    equal activation, ``smooth`` iff ``alpha = 1``, ``alpha`` is the ONNX attribute; and their
+    value enclosure comes from the ends (both are increasing)."""
+    from drip_cert.model.activations import get_activation
+
+    act = get_activation(spec)
+    assert get_activation(act.spec) == act and hash(get_activation(act.spec)) == hash(act)
+    assert act.smooth is smooth and act.onnx_attributes() == onnx
+    lo, hi = np.array([-2.0, -1.0, 0.5]), np.array([-1.5, 3.0, 0.75])
+    elo, ehi = act.enclose(lo, hi)
+    assert np.all(elo <= act.value_np(lo)) and np.all(ehi >= act.value_np(hi))
+    assert np.array_equal(elo, act._value_point(lo)[0])
+    assert np.array_equal(ehi, act._value_point(hi)[1])
