@@ -115,11 +115,7 @@ def l1_front_figure(design: L1Design | Mapping[str, Any], path: str | Path) -> P
     ax.set_title(title)
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=8, loc="upper left")
-    fig.tight_layout()
-    out = Path(path)
-    fig.savefig(out)
-    plt.close(fig)
-    return out
+    return _save(fig, path)
 
 
 def l1_terms_figure(design: L1Design | Mapping[str, Any], path: str | Path) -> Path:
@@ -207,6 +203,13 @@ def l1_terms_figure(design: L1Design | Mapping[str, Any], path: str | Path) -> P
     bx.grid(True, which="both", alpha=0.3)
     if bx.get_legend_handles_labels()[0]:
         bx.legend(fontsize=8, loc="upper left")
+    return _save(fig, path)
+
+
+def _save(fig: Any, path: str | Path) -> Path:
+    """Lay ``fig`` out, write it to ``path`` (its suffix picks the format) and close it."""
+    import matplotlib.pyplot as plt  # matplotlib: keep off the CLI start-up path
+
     fig.tight_layout()
     out = Path(path)
     fig.savefig(out)
