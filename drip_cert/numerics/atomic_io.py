@@ -36,7 +36,7 @@ def jsonable(obj: Any) -> Any:
     if isinstance(obj, int | np.integer):
         return int(obj)
     if isinstance(obj, float | np.floating):
-        return json_float(obj)
+        return json_float(float(obj))
     return obj
 
 
