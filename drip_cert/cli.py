@@ -530,54 +530,33 @@ def _backend(args: argparse.Namespace) -> Backend:
     return Backend(args.backend, args.scheduler)
 
 
-def _nonneg_float(text: str) -> float:
-    try:
-        v = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number >= 0, got {text!r}") from None
-    if not (v >= 0 and v != float("inf")):
-        raise argparse.ArgumentTypeError(f"expected a finite number >= 0, got {text!r}")
-    return v
+def _number_type(
+    parse: Callable[[str], Any], ok: Callable[[Any], bool], what: str, bad: str | None = None
+) -> Callable[[str], Any]:
+    """An argparse ``type``: ``parse(text)``, then ``ok(value)`` or the message "expected
+    ``what`` (``bad`` when the value parsed but is out of range), got 'text'"."""
+
+    def convert(text: str) -> Any:
+        try:
+            v = parse(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected {what}, got {text!r}") from None
+        if not ok(v):  # NaN fails every comparison
+            raise argparse.ArgumentTypeError(f"expected {bad or what}, got {text!r}")
+        return v
+
+    return convert
 
 
-def _posfloat(text: str) -> float:
-    try:
-        v = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number > 0, got {text!r}") from None
-    if not (v > 0 and math.isfinite(v)):
-        raise argparse.ArgumentTypeError(f"expected a finite number > 0, got {text!r}")
-    return v
-
-
-def _positive_or_inf(text: str) -> float:
-    try:
-        v = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number > 0 (or inf), got {text!r}") from None
-    if not v > 0:  # NaN fails too
-        raise argparse.ArgumentTypeError(f"expected a number > 0 (or inf), got {text!r}")
-    return v
-
-
-def _posint(text: str) -> int:
-    try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from None
-    if v < 1:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}")
-    return v
-
-
-def _nonneg_int(text: str) -> int:
-    try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected an integer >= 0, got {text!r}") from None
-    if v < 0:
-        raise argparse.ArgumentTypeError(f"expected an integer >= 0, got {text!r}")
-    return v
+_nonneg_float = _number_type(
+    float, lambda v: v >= 0 and v != math.inf, "a number >= 0", "a finite number >= 0"
+)
+_posfloat = _number_type(
+    float, lambda v: v > 0 and math.isfinite(v), "a number > 0", "a finite number > 0"
+)
+_positive_or_inf = _number_type(float, lambda v: v > 0, "a number > 0 (or inf)")
+_posint = _number_type(int, lambda v: v >= 1, "a positive integer")
+_nonneg_int = _number_type(int, lambda v: v >= 0, "an integer >= 0")
 
 
 # ---------------------------------------------------------------------------- files and errors

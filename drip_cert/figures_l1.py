@@ -55,27 +55,25 @@ def l1_front_figure(design: L1Design | Mapping[str, Any], path: str | Path) -> P
     def x(p: Mapping[str, Any]) -> float:
         return max(float(p["Ts"]), x_min)
 
-    ok = [p for p in front if not p.get("knife_edge")]
-    edge = [p for p in front if p.get("knife_edge")]
-    if front:
-        ax.plot([x(p) for p in front], [p["rho"] for p in front], "-", color="0.6", lw=1)
-    if ok:
-        ax.plot(
-            [x(p) for p in ok],
-            [p["rho"] for p in ok],
-            "o",
-            color="tab:blue",
-            label="front (verified in Arb)",
-        )
-    if edge:
-        ax.plot(
-            [x(p) for p in edge],
-            [p["rho"] for p in edge],
-            "x",
-            color="tab:red",
-            ms=8,
-            label="knife edge (verified, never the default)",
-        )
+    def points(pts: list[Mapping[str, Any]], fmt: str, **style: Any) -> None:
+        """``(T_s, rho)`` of ``pts`` in the format ``fmt`` (nothing when there are none)."""
+        if pts:
+            ax.plot([x(p) for p in pts], [p["rho"] for p in pts], fmt, **style)
+
+    points(front, "-", color="0.6", lw=1)
+    points(
+        [p for p in front if not p.get("knife_edge")],
+        "o",
+        color="tab:blue",
+        label="front (verified in Arb)",
+    )
+    points(
+        [p for p in front if p.get("knife_edge")],
+        "x",
+        color="tab:red",
+        ms=8,
+        label="knife edge (verified, never the default)",
+    )
     for p in front:
         if p["Ts"] < x_min:
             ax.annotate(
@@ -117,11 +115,7 @@ def l1_front_figure(design: L1Design | Mapping[str, Any], path: str | Path) -> P
     ax.set_title(title)
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=8, loc="upper left")
-    fig.tight_layout()
-    out = Path(path)
-    fig.savefig(out)
-    plt.close(fig)
-    return out
+    return _save(fig, path)
 
 
 def l1_terms_figure(design: L1Design | Mapping[str, Any], path: str | Path) -> Path:
@@ -209,6 +203,13 @@ def l1_terms_figure(design: L1Design | Mapping[str, Any], path: str | Path) -> P
     bx.grid(True, which="both", alpha=0.3)
     if bx.get_legend_handles_labels()[0]:
         bx.legend(fontsize=8, loc="upper left")
+    return _save(fig, path)
+
+
+def _save(fig: Any, path: str | Path) -> Path:
+    """Lay ``fig`` out, write it to ``path`` (its suffix picks the format) and close it."""
+    import matplotlib.pyplot as plt  # matplotlib: keep off the CLI start-up path
+
     fig.tight_layout()
     out = Path(path)
     fig.savefig(out)

@@ -313,7 +313,37 @@ class Identity(Activation):
 
 
 @dataclass(frozen=True)
-class LeakyRelu(Activation):
+class _Increasing(Activation):
+    """An increasing activation whose :meth:`_value_point` encloses ``s`` at points: the values
+    over ``[lo, hi]`` come from the ends (rounded outward there)."""
+
+    def enclose(self, lo, hi):
+        lo, hi = _arr(lo), _arr(hi)
+        return self._value_point(lo)[0], self._value_point(hi)[1]
+
+
+@dataclass(frozen=True)
+class _OneSlope(_Increasing):
+    """Shared by :class:`LeakyRelu` and :class:`Elu`: the identity for ``z > 0``, increasing,
+    one parameter ``alpha`` (the left slope at 0; in :attr:`spec` and the ONNX attribute);
+    ``s'`` is Lipschitz exactly when ``alpha = 1``."""
+
+    alpha: float = 1.0
+
+    @property
+    def smooth(self) -> bool:
+        return self.alpha == 1.0
+
+    @property
+    def spec(self) -> str:
+        return f"{self.name}({self.alpha!r})"
+
+    def onnx_attributes(self):
+        return {"alpha": self.alpha}
+
+
+@dataclass(frozen=True)
+class LeakyRelu(_OneSlope):
     """``s(z) = z`` for ``z >= 0``, ``alpha z`` for ``z < 0`` (``alpha >= 0``).
 
     Piecewise linear: the slopes are ``alpha`` and ``1``; the Clarke generalized derivative at 0
@@ -332,14 +362,6 @@ class LeakyRelu(Activation):
             raise SpecError(f"leaky_relu slope alpha must be finite and >= 0, got {self.alpha!r}")
         object.__setattr__(self, "alpha", a)
 
-    @property
-    def smooth(self) -> bool:
-        return self.alpha == 1.0
-
-    @property
-    def spec(self) -> str:
-        return f"{self.name}({self.alpha!r})"
-
     def apply(self, z, xp=np):
         return xp.where(z >= 0, z, self.alpha * z)
 
@@ -351,10 +373,6 @@ class LeakyRelu(Activation):
         v = np.where(neg, self.alpha * z, z)
         # alpha z is one rounding when z < 0; z itself is exact
         return np.where(neg, down_np(v), v), np.where(neg, up_np(v), v)
-
-    def enclose(self, lo, hi):
-        lo, hi = _arr(lo), _arr(hi)
-        return self._value_point(lo)[0], self._value_point(hi)[1]
 
     def slope_range(self, lo, hi):
         lo, hi = _arr(lo), _arr(hi)
@@ -371,9 +389,6 @@ class LeakyRelu(Activation):
 
     def _limits(self):
         return (self.alpha, 1.0), (0.0, 0.0)
-
-    def onnx_attributes(self):
-        return {"alpha": self.alpha}
 
 
 @dataclass(frozen=True)
@@ -401,7 +416,7 @@ class Relu(LeakyRelu):
 
 
 @dataclass(frozen=True)
-class PRelu(Activation):
+class PRelu(_Increasing):
     """Leaky relu with one slope per unit (ONNX ``PRelu`` with a slope tensor of the layer
     width, PyTorch ``nn.PReLU(num_parameters=n)``): ``s_i(z) = z`` for ``z >= 0``,
     ``alpha_i z`` for ``z < 0`` (every ``alpha_i >= 0``).
@@ -455,10 +470,6 @@ class PRelu(Activation):
         neg = z < 0
         v = np.where(neg, self._a() * z, z)
         return np.where(neg, down_np(v), v), np.where(neg, up_np(v), v)
-
-    def enclose(self, lo, hi):
-        lo, hi = _arr(lo), _arr(hi)
-        return self._value_point(lo)[0], self._value_point(hi)[1]
 
     def slope_range(self, lo, hi):
         lo, hi = _arr(lo), _arr(hi)
@@ -763,7 +774,7 @@ def _silu_crits():
 
 
 @dataclass(frozen=True)
-class Elu(Activation):
+class Elu(_OneSlope):
     """``s(z) = z`` for ``z > 0``, ``alpha (e^z - 1)`` for ``z <= 0`` (``alpha > 0``).
 
     Increasing. ``s' = 1`` on ``z > 0`` and ``alpha e^z`` (increasing) on ``z < 0``; at 0 the
@@ -782,14 +793,6 @@ class Elu(Activation):
             raise SpecError(f"elu alpha must be finite and > 0, got {self.alpha!r}")
         object.__setattr__(self, "alpha", a)
 
-    @property
-    def smooth(self) -> bool:
-        return self.alpha == 1.0
-
-    @property
-    def spec(self) -> str:
-        return f"{self.name}({self.alpha!r})"
-
     def apply(self, z, xp=np):
         return xp.where(z > 0, z, self.alpha * xp.expm1(xp.minimum(z, 0.0)))
 
@@ -805,10 +808,6 @@ class Elu(Activation):
         lo = np.where(neg, down_np(self.alpha * m_lo), z)
         hi = np.where(neg, up_np(self.alpha * m_hi), z)
         return lo, hi
-
-    def enclose(self, lo, hi):
-        lo, hi = _arr(lo), _arr(hi)
-        return self._value_point(lo)[0], self._value_point(hi)[1]
 
     def _neg_exp(self, lo, hi, scale: float) -> Pair:
         """``scale * e^z`` over ``[lo, min(hi, 0)]`` (increasing), outward."""
@@ -840,9 +839,6 @@ class Elu(Activation):
 
     def _limits(self):
         return (0.0, 1.0), (0.0, 0.0)
-
-    def onnx_attributes(self):
-        return {"alpha": self.alpha}
 
 
 # --------------------------------------------------------------------------- gelu

@@ -9,7 +9,6 @@ process is interrupted (the temporary file is removed on any exception). JSON go
 from __future__ import annotations
 
 import json
-import math
 import os
 import tempfile
 from collections.abc import Callable
@@ -17,6 +16,8 @@ from pathlib import Path
 from typing import IO, Any
 
 import numpy as np
+
+from drip_cert.provenance import json_float
 
 __all__ = ["atomic_savez", "atomic_write_json", "atomic_write_text", "jsonable"]
 
@@ -35,12 +36,7 @@ def jsonable(obj: Any) -> Any:
     if isinstance(obj, int | np.integer):
         return int(obj)
     if isinstance(obj, float | np.floating):
-        v = float(obj)
-        if math.isnan(v):
-            return None
-        if math.isinf(v):
-            return "inf" if v > 0 else "-inf"
-        return v
+        return json_float(float(obj))
     return obj
 
 

@@ -50,6 +50,7 @@ from drip_cert.bounds.l1drac.designer import design
 from drip_cert.bounds.l1drac.request import DesignRequest
 from drip_cert.errors import SpecError
 from drip_cert.spec.settings import (
+    L1_DESIGN_KEYS,
     L1Settings,
     TableReader,
     positive_float,
@@ -64,21 +65,7 @@ __all__ = ["DESIGN_KEYS", "load_l1_constants", "design_l1_report"]
 #: (:func:`drip_cert.spec.settings.read_l1_design`).
 DESIGN_KEYS = MappingProxyType(
     {
-        **{
-            k: L1Settings.KEYS[k]
-            for k in (
-                "p",
-                "lambda_s",
-                "omega",
-                "Ts",
-                "rho_r",
-                "rho_a",
-                "delta",
-                "objective",
-                "rho_budget",
-                "front",
-            )
-        },
+        **{k: L1Settings.KEYS[k] for k in ("p", *L1_DESIGN_KEYS)},
         "omega_min": "lower end of the omega search interval",
         "omega_max": "upper end of the omega search interval",
     }
