@@ -211,7 +211,8 @@ _VERDICT_RANK = {"certified": 0, "conditional": 1, "not_certified": 2}
 
 def _closeness(a: dict[str, Any]) -> tuple[int, int, float]:
     """Order of the coordinate candidates: verdict, failing checks, then the radius in x."""
-    parts = [v for v in (a.get("rho_tasil_x"), a.get("rho_l1_x")) if v is not None]
+    # JSON numbers: a float, None (not computed) or "inf" / "-inf" (provenance.json_float)
+    parts = [float(v) for v in (a.get("rho_tasil_x"), a.get("rho_l1_x")) if v is not None]
     rho = sum(parts) if parts and all(math.isfinite(v) for v in parts) else math.inf
     return _VERDICT_RANK.get(a.get("verdict", ""), 3), int(a.get("failing", 0)), rho
 

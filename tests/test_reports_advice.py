@@ -149,3 +149,14 @@ def test_certify_export_l1_constants_end_to_end(tmp_path, capsys):
     rep = design_l1_report(out)
     assert rep["rho"] == pytest.approx(l1["rho"], rel=RHO_RTOL)
     assert rep["Ts"] == pytest.approx(l1["Ts"], rel=RHO_RTOL)
+
+
+def test_candidates_with_an_infinite_radius_are_ranked_not_crashed():
+    """A candidate's radius may be ``"inf"`` in the JSON (a TaSIL bound that does not exist):
+    the ranking reads it as infinity (it crashed the text report with a TypeError)."""
+    from drip_cert.report import _closeness
+
+    finite = {"verdict": "not_certified", "failing": 1, "rho_tasil_x": 1.0, "rho_l1_x": 2.0}
+    infinite = {"verdict": "not_certified", "failing": 1, "rho_tasil_x": "inf", "rho_l1_x": None}
+    assert _closeness(infinite) == (2, 1, float("inf"))
+    assert sorted([infinite, finite], key=_closeness) == [finite, infinite]
