@@ -172,6 +172,70 @@ _SDE_REASON = (
 
 
 @dataclass(frozen=True)
+class Claims:
+    """What a certificate claims, in the user's coordinates ``x`` (frozen): the numbers that
+    ``validate`` (simulated runs) and ``validate --data`` (recorded runs) check.
+
+    A certificate computed in ``z = Theta x`` is mapped back by ``F = ||Theta^{-1}||_2``
+    (docs/math/contraction.md Proposition 5.3): ``||x gap|| <= F ||z gap||``, so a radius or a
+    tail threshold ``kappa`` in ``z`` is ``F`` times itself in ``x``
+    (``P(||x gap|| >= F kappa) <= P(||z gap|| >= kappa)``); probabilities and the design are
+    unchanged.
+
+    Attributes
+    ----------
+    rho_tasil, delta_tasil
+        ``P(max_t ||x'_t - x*_t|| > rho_TaSIL) <= delta_TaSIL`` (DRIP Theorem thm:TaSIL);
+        ``None`` when no TaSIL part was computed.
+    rho_l1, p
+        ``sup_t ||X_t - x'_t||_{L_2p} <= rho_L1`` (L1-DRAC Theorem 4.1); ``p = 1`` without a
+        feasible design.
+    kappa, delta_l1
+        The tail bound ``P(||X_t - x'_t|| >= kappa) <= delta_L1`` of the design (``kappa`` in
+        ``x``); ``None`` without a feasible design or without a requested ``delta``.
+    design
+        The certified L1-DRAC design ``(omega, lambda_s, T_s)``; ``None`` when none is feasible.
+    rho_sde
+        ``sup_t ||X*_t - x'_t||_{L_2p}`` with a known diffusion, else ``None``.
+    rho
+        ``rho_TaSIL + rho_L1 (+ rho_sde)`` (DRIP eq. TotalTIG), ``None`` unless both parts exist.
+    """
+
+    rho_tasil: float | None
+    delta_tasil: float | None
+    rho_l1: float | None
+    p: int
+    kappa: float | None
+    delta_l1: float | None
+    design: tuple[float, float, float] | None
+    rho_sde: float | None
+    rho: float | None
+
+    @classmethod
+    def of(cls, cert: Any) -> Claims:
+        """The claims of ``cert`` (a :class:`Certificate` or an object with its attributes)."""
+        l1 = cert.l1
+        design = l1.design if (l1 is not None and l1.feasible) else None
+        coords = cert.coordinates
+        kappa = design.kappa if design is not None else None
+        if kappa is not None and coords is not None:
+            kappa = coords.gap_in_x(kappa)  # P(||x gap|| >= F kappa) <= P(||z gap|| >= kappa)
+        return cls(
+            rho_tasil=cert.rho_tasil,
+            delta_tasil=cert.tasil.delta if cert.tasil is not None else None,
+            rho_l1=cert.rho_l1,
+            p=design.p if design is not None else 1,
+            kappa=kappa,
+            delta_l1=design.delta if design is not None else None,
+            design=None
+            if design is None
+            else (float(design.omega), float(design.lambda_s), float(design.Ts)),
+            rho_sde=cert.rho_sde,
+            rho=cert.rho,
+        )
+
+
+@dataclass(frozen=True)
 class Certificate:
     """The certificate of one system (frozen). See the module docstring for the JSON keys.
 
@@ -332,6 +396,11 @@ class Certificate:
             return None
         total = up(self.rho_tasil + self.rho_l1)
         return total if self.rho_sde is None else up(total + self.rho_sde)
+
+    def claims(self) -> Claims:
+        """What this certificate claims, in the user's ``x`` (:class:`Claims`): the one reading
+        of the bounds that ``validate`` and ``validate --data`` check."""
+        return Claims.of(self)
 
     def to_dict(self) -> dict[str, Any]:
         ce = self.contraction_expert
