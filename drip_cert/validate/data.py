@@ -823,7 +823,7 @@ def validate_data(
     check_fits(data, n_state=n_state, certified_horizon=certified_horizon)
     warning = check_fingerprint(cert, data, accept_unfingerprinted=accept_unfingerprinted)
     T_end = float(data.times[-1])
-    # the certified numbers in the user's x, as drip_cert.validate.run.validate reads them
+    # the certified numbers in the user's x (Certificate.claims: validate reads the same)
     c = cert.claims()
     rho_tasil, delta_tasil, rho_l1 = c.rho_tasil, c.delta_tasil, c.rho_l1
     p, kappa, delta_l1 = c.p, c.kappa, c.delta_l1
