@@ -27,7 +27,7 @@ LAYERS: dict[str, int] = {
     "errors": 1,
     "provenance": 1,
     "progress": 1,
-    "vocabulary": 1,  # the names of the simulated processes and gaps (sim and validate)
+    "vocabulary": 1,  # names shared across layers: processes and gaps, contraction routes
     "_jax": 2,
     "numerics": 2,
     "schema": 2,  # the output layouts (JSON Schema files) and their loader

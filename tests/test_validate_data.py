@@ -142,15 +142,21 @@ def test_minimum_paths_is_the_clopper_pearson_closed_form(delta, level):
 
 
 def _stub_certificate(rho_tasil, rho_l1, kappa, ts=0.01):
+    from drip_cert.bounds.certificate import Claims
+
     design = SimpleNamespace(p=1, kappa=kappa, delta=0.2, omega=30.0, lambda_s=8.0, Ts=ts)
-    return SimpleNamespace(
+    stub = SimpleNamespace(
         rho_tasil=rho_tasil,
         rho_l1=rho_l1,
+        rho_sde=None,
+        rho=None,
         tasil=SimpleNamespace(delta=0.1),
         l1=SimpleNamespace(feasible=True, design=design),
         coordinates=None,
         to_dict=lambda: {},
     )
+    stub.claims = lambda: Claims.of(stub)
+    return stub
 
 
 def test_the_engine_own_trajectories_as_data_give_the_engine_checks_bit_for_bit():

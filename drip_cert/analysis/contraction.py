@@ -33,7 +33,8 @@ import math
 import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any
+from types import MappingProxyType
+from typing import Any, Protocol
 
 import numpy as np
 import sympy as sp
@@ -52,9 +53,12 @@ from drip_cert.numerics.interval import (
     opaque_functions,
 )
 from drip_cert.provenance import GLOBAL, How, Quantity, Scope, json_float
+from drip_cert.vocabulary import CONTRACTION_AUTO, CONTRACTION_METHODS, CONTRACTION_ROUTE_NAMES
 
 __all__ = [
     "ContractionResult",
+    "ROUTES",
+    "Route",
     "SamplingOptions",
     "contraction_rate",
     "sampled_max_mu2",
@@ -76,7 +80,6 @@ DEFAULT_MAX_TIME_S = math.inf
 JacobianFn = Callable[[np.ndarray, np.ndarray], np.ndarray]
 
 _SOURCE = "DRIP Assumption 2 (eqn:ILFConditions), Euclidean log norm"
-_METHODS = ("auto", "exact-linear", "interval-bnb", "mlp-bnb", "sampled")
 
 
 @dataclass(frozen=True)
@@ -391,9 +394,12 @@ def contraction_rate(
     enclose
         Interval callback for undefined functions (see :mod:`drip_cert.numerics.interval`).
     method
-        ``'auto'`` (exact if ``J`` is constant, else ``'mlp-bnb'`` when it applies, else
-        interval branch and bound, falling back to sampling when an expression has no sound
-        enclosure), ``'exact-linear'``, ``'interval-bnb'``, ``'mlp-bnb'`` or ``'sampled'``.
+        ``'auto'`` (the first route of :data:`ROUTES` that applies: exact if ``J`` is constant,
+        else ``'mlp-bnb'`` when it applies, else interval branch and bound, falling back to
+        sampling when an expression has no sound enclosure), or a route's name
+        (:data:`drip_cert.vocabulary.CONTRACTION_ROUTES`): ``'exact-linear'``,
+        ``'interval-bnb'``, ``'mlp-bnb'`` or ``'sampled'``. A constant ``J`` is always
+        ``'exact-linear'``.
     tol
         Absolute target gap between the sound upper bound and the sampled maximum of ``mu_2``.
     max_boxes, max_time_s
@@ -412,37 +418,16 @@ def contraction_rate(
     """
     t0 = time.perf_counter()
     n, states, box, t_range = _check_inputs(J, states, box, t, t_range)
-    if method not in _METHODS:
-        raise SpecError(f"unknown method {method!r}; use one of {_METHODS}", field="method")
+    if method not in CONTRACTION_METHODS:
+        raise SpecError(
+            f"unknown method {method!r}; use one of {CONTRACTION_METHODS}", field="method"
+        )
     if tol <= 0:
         raise SpecError(f"tol must be > 0, got {tol}", field="tol")
     depends_x = bool(J.free_symbols & set(states)) or bool(opaque_functions(J))
     depends_t = t is not None and J.has(t)
-
     if not depends_x and not depends_t:
-        # a constant Jacobian: lambda_max of its symmetric part isolated exactly (rational
-        # characteristic polynomial, roots in Arb); float eigvalsh of the rounded matrix can have
-        # the wrong sign when mu_2 is within rounding of 0
-        try:
-            lo_mu, ub = mu2_constant_bounds(sp.Matrix(J))
-        except (TypeError, ValueError) as exc:
-            raise SpecError(f"J is constant but not real-valued: {J}", field="J") from exc
-        mid = float(lo_mu)
-        return _result(
-            t0,
-            How.EXACT,
-            "exact-linear",
-            GLOBAL,
-            upper=ub,
-            sampled=mid,
-            witness=None,
-            tolerance=0.0,
-            n_boxes=0,
-            stop="exact",
-            note="constant Jacobian (linear or affine closed loop): mu_2 = lambda_max(sym J) "
-            "isolated exactly (rational characteristic polynomial, roots in Arb); the rate is "
-            "the rigorous lower end",
-        )
+        return _exact_linear(t0, J)  # whatever the method: the closed form is best
     if method == "exact-linear":
         raise SpecError(
             "method 'exact-linear' needs a Jacobian constant in x and t; use 'auto'", field="method"
@@ -461,64 +446,140 @@ def contraction_rate(
         )
     # the box of the search: states (a dummy 0-width box when J is free of x), then time
     sbox = box if box is not None else np.zeros((n, 2))
-    full = np.vstack([sbox, [t_range]]) if depends_t else sbox.copy()
-    variables = [*states, t] if depends_t else list(states)
-    scope = _scope(box if depends_x else None, t_range, depends_t)
     if J_num is None:
         try:
             J_num = jacobian_function(J, states, t)
         except UnsupportedExpression:
             J_num = None
-
-    if method in ("auto", "mlp-bnb") and not depends_t and box is not None:
-        dec = decompose_jacobian(J, states, mlps) if mlps else None
-        if dec is not None:
-            return _mlp_bnb(t0, dec, box, J_num, scope, tol, max_boxes, max_time_s, sampling)
-    if method == "mlp-bnb":
-        raise SpecError(
-            "method 'mlp-bnb' needs a time-invariant Jacobian A + sum_k C_k Dh_k(x) of MLP blocks "
-            "applied to the state, their MLPs passed as mlps=..., and a box; use 'auto'",
-            field="method",
-        )
-
-    menc: MatrixEnclosure | None = None
+    problem = _Problem(
+        t0=t0,
+        J=J,
+        n=n,
+        box=box,
+        full=np.vstack([sbox, [t_range]]) if depends_t else sbox.copy(),
+        variables=[*states, t] if depends_t else list(states),
+        states=list(states),
+        depends_x=depends_x,
+        depends_t=depends_t,
+        scope=_scope(box if depends_x else None, t_range, depends_t),
+        J_num=J_num,
+        enclose=enclose,
+        tol=tol,
+        max_boxes=max_boxes,
+        max_time_s=max_time_s,
+        sampling=sampling,
+        mlps=mlps,
+    )
+    if method != CONTRACTION_AUTO:
+        out = ROUTES[method](problem, explicit=True, reason="")
+        if isinstance(out, str):
+            raise SpecError(out, field="method")
+        return out
     reason = ""
-    if method in ("auto", "interval-bnb"):
-        try:
-            menc = MatrixEnclosure(J, variables, enclose)
-            menc(full)  # domain errors and callback refusals surface here
-        except UnsupportedExpression as exc:
-            if method == "interval-bnb":
-                raise
-            menc, reason = None, str(exc)
+    for route in _AUTO_ROUTES:
+        got = route(problem, explicit=False, reason=reason)
+        if not isinstance(got, str):
+            return got
+        reason = got
+    raise AssertionError("the sampled route always applies")  # pragma: no cover
 
+
+@dataclass(frozen=True)
+class _Problem:
+    """A rate problem prepared for the routes: ``J`` on the search box ``full`` (states, then
+    the time range when ``J`` depends on ``t``)."""
+
+    t0: float  #: start of the wall clock (a timing)
+    J: sp.Matrix
+    n: int
+    box: np.ndarray | None
+    full: np.ndarray
+    variables: list[sp.Symbol]
+    states: list[sp.Symbol]
+    depends_x: bool
+    depends_t: bool
+    scope: Scope
+    J_num: JacobianFn | None
+    enclose: EncloseCallback | None
+    tol: float
+    max_boxes: int
+    max_time_s: float
+    sampling: SamplingOptions
+    mlps: Mapping[str, MLP] | None
+
+
+class Route(Protocol):
+    """A route of :func:`contraction_rate`: its result, or why it does not apply (a sentence).
+
+    ``explicit``: the caller named this route (a route that cannot run raises, rather than
+    stepping aside for the next); ``reason``: why the previous route did not apply.
+    """
+
+    def __call__(self, p: _Problem, *, explicit: bool, reason: str) -> ContractionResult | str: ...
+
+
+def _exact_linear(t0: float, J: sp.Matrix) -> ContractionResult:
+    """A constant Jacobian: ``mu_2 = lambda_max(sym J)`` isolated exactly."""
+    # rational characteristic polynomial, roots in Arb; float eigvalsh of the rounded matrix can
+    # have the wrong sign when mu_2 is within rounding of 0
+    try:
+        lo_mu, ub = mu2_constant_bounds(sp.Matrix(J))
+    except (TypeError, ValueError) as exc:
+        raise SpecError(f"J is constant but not real-valued: {J}", field="J") from exc
+    mid = float(lo_mu)
+    return _result(
+        t0,
+        How.EXACT,
+        "exact-linear",
+        GLOBAL,
+        upper=ub,
+        sampled=mid,
+        witness=None,
+        tolerance=0.0,
+        n_boxes=0,
+        stop="exact",
+        note="constant Jacobian (linear or affine closed loop): mu_2 = lambda_max(sym J) "
+        "isolated exactly (rational characteristic polynomial, roots in Arb); the rate is "
+        "the rigorous lower end",
+    )
+
+
+def _exact_linear_route(p: _Problem, *, explicit: bool, reason: str) -> ContractionResult | str:
+    """``'exact-linear'`` as a route: applies only to a Jacobian constant in ``x`` and ``t``."""
+    if p.depends_x or p.depends_t:
+        return "method 'exact-linear' needs a Jacobian constant in x and t; use 'auto'"
+    return _exact_linear(p.t0, p.J)
+
+
+def _mlp_bnb_route(p: _Problem, *, explicit: bool, reason: str) -> ContractionResult | str:
+    """``'mlp-bnb'``: a time-invariant ``J = A + sum_k C_k Dh_k(x)`` of MLP blocks on a box."""
+    if not p.depends_t and p.box is not None:
+        dec = decompose_jacobian(p.J, p.states, p.mlps) if p.mlps else None
+        if dec is not None:
+            return _mlp_bnb(
+                p.t0, dec, p.box, p.J_num, p.scope, p.tol, p.max_boxes, p.max_time_s, p.sampling
+            )
+    return (
+        "method 'mlp-bnb' needs a time-invariant Jacobian A + sum_k C_k Dh_k(x) of MLP blocks "
+        "applied to the state, their MLPs passed as mlps=..., and a box; use 'auto'"
+    )
+
+
+def _interval_bnb_route(p: _Problem, *, explicit: bool, reason: str) -> ContractionResult | str:
+    """``'interval-bnb'``: interval enclosures of ``J`` and branch and bound of the Rohn-type
+    bound of ``mu_2``; without a sound enclosure, named: raises, else steps aside (why)."""
+    try:
+        menc = MatrixEnclosure(p.J, p.variables, p.enclose)
+        menc(p.full)  # domain errors and callback refusals surface here
+    except UnsupportedExpression as exc:
+        if explicit:
+            raise
+        return str(exc)
+    n, full, J_num, depends_t = p.n, p.full, p.J_num, p.depends_t
     if J_num is not None:
-        lb, arg = sampled_max_mu2(J_num, full, n, sampling)
-    elif menc is not None:
-        lb, arg = -math.inf, 0.5 * (full[:, 0] + full[:, 1])
+        lb, arg = sampled_max_mu2(J_num, full, n, p.sampling)
     else:
-        raise UnsupportedExpression(
-            f"no sound enclosure ({reason}) and no J_num to sample: "
-            "pass J_num or an enclose callback"
-        )
-
-    if menc is None:
-        return _result(
-            t0,
-            How.ESTIMATE,
-            "sampled",
-            scope,
-            upper=math.nan,
-            sampled=lb,
-            witness=arg,
-            tolerance=tol,
-            n_boxes=0,
-            stop="sampled",
-            note=(
-                "sampled estimate (grid + random + local search), NOT a bound"
-                + (f"; no sound enclosure: {reason}" if reason else "")
-            ),
-        )
+        lb, arg = -math.inf, 0.5 * (full[:, 0] + full[:, 1])
 
     def point_mu(z: np.ndarray) -> float:
         if J_num is not None:
@@ -538,10 +599,10 @@ def contraction_rate(
         full,
         upper,
         point_mu,
-        atol=tol,
-        max_boxes=max_boxes,
-        max_time_s=max_time_s,
-        active=[J.has(v) for v in variables],
+        atol=p.tol,
+        max_boxes=p.max_boxes,
+        max_time_s=p.max_time_s,
+        active=[p.J.has(v) for v in p.variables],
         initial=(lb, arg),
     )
     ub, lb, witness, n_boxes = res.upper, res.lower, res.argmax, res.n_boxes
@@ -552,18 +613,19 @@ def contraction_rate(
             "J_num does not evaluate the same Jacobian as J (or an enclose callback is unsound)"
         )
     gap = ub - lb
+    tol = p.tol
     note = (
         f"sound bound {ub:.6g} vs sampled {lb:.6g}, gap {gap:.3g}"
         + (" <= tol" if gap <= tol else f" > tol {tol:g}: {_spent(res.stop, n_boxes)}")
-        + ("" if depends_x else "; J is independent of x, so the rate holds for all x")
+        + ("" if p.depends_x else "; J is independent of x, so the rate holds for all x")
     )
-    if depends_x:
+    if p.depends_x:
         note += "; holds only on the box (the paper asks for all x)"
     return _result(
-        t0,
+        p.t0,
         How.SOUND,
         "interval-bnb",
-        scope,
+        p.scope,
         upper=ub,
         sampled=lb,
         witness=witness,
@@ -572,6 +634,48 @@ def contraction_rate(
         stop=res.stop,
         note=note,
     )
+
+
+def _sampled_route(p: _Problem, *, explicit: bool, reason: str) -> ContractionResult | str:
+    """``'sampled'``: grid + random points + local search, an estimate (never a bound);
+    ``reason``: why no sound route applied, for the note."""
+    if p.J_num is None:
+        raise UnsupportedExpression(
+            f"no sound enclosure ({reason}) and no J_num to sample: "
+            "pass J_num or an enclose callback"
+        )
+    lb, arg = sampled_max_mu2(p.J_num, p.full, p.n, p.sampling)
+    return _result(
+        p.t0,
+        How.ESTIMATE,
+        "sampled",
+        p.scope,
+        upper=math.nan,
+        sampled=lb,
+        witness=arg,
+        tolerance=p.tol,
+        n_boxes=0,
+        stop="sampled",
+        note=(
+            "sampled estimate (grid + random + local search), NOT a bound"
+            + (f"; no sound enclosure: {reason}" if reason else "")
+        ),
+    )
+
+
+ROUTES: Mapping[str, Route] = MappingProxyType(
+    {
+        "exact-linear": _exact_linear_route,
+        "mlp-bnb": _mlp_bnb_route,
+        "interval-bnb": _interval_bnb_route,
+        "sampled": _sampled_route,
+    }
+)
+"""The implementations of the routes named in :data:`drip_cert.vocabulary.CONTRACTION_ROUTES`
+(their meanings), in the order ``'auto'`` tries them."""
+
+#: ``'auto'`` after the constant case: the routes that can apply to a ``J`` varying in x or t
+_AUTO_ROUTES = tuple(ROUTES[name] for name in CONTRACTION_ROUTE_NAMES if name != "exact-linear")
 
 
 def _mlp_bnb(

@@ -50,7 +50,7 @@ from drip_cert.provenance import (
     verdict_of,
 )
 from drip_cert.spec.load import Spec, SpecSource, as_spec
-from drip_cert.spec.settings import ContractionSettings
+from drip_cert.spec.settings import ContractionSettings, Settings
 
 if TYPE_CHECKING:
     from drip_cert.analysis.iss import DeltaISSResult
@@ -169,6 +169,70 @@ _SDE_REASON = (
     "L1-DRAC Assumption 2 is needed for all x: trajectories of the true SDE leave every bounded "
     "set with positive probability, so a rate proved on {scope} does not suffice"
 )
+
+
+@dataclass(frozen=True)
+class Claims:
+    """What a certificate claims, in the user's coordinates ``x`` (frozen): the numbers that
+    ``validate`` (simulated runs) and ``validate --data`` (recorded runs) check.
+
+    A certificate computed in ``z = Theta x`` is mapped back by ``F = ||Theta^{-1}||_2``
+    (docs/math/contraction.md Proposition 5.3): ``||x gap|| <= F ||z gap||``, so a radius or a
+    tail threshold ``kappa`` in ``z`` is ``F`` times itself in ``x``
+    (``P(||x gap|| >= F kappa) <= P(||z gap|| >= kappa)``); probabilities and the design are
+    unchanged.
+
+    Attributes
+    ----------
+    rho_tasil, delta_tasil
+        ``P(max_t ||x'_t - x*_t|| > rho_TaSIL) <= delta_TaSIL`` (DRIP Theorem thm:TaSIL);
+        ``None`` when no TaSIL part was computed.
+    rho_l1, p
+        ``sup_t ||X_t - x'_t||_{L_2p} <= rho_L1`` (L1-DRAC Theorem 4.1); ``p = 1`` without a
+        feasible design.
+    kappa, delta_l1
+        The tail bound ``P(||X_t - x'_t|| >= kappa) <= delta_L1`` of the design (``kappa`` in
+        ``x``); ``None`` without a feasible design or without a requested ``delta``.
+    design
+        The certified L1-DRAC design ``(omega, lambda_s, T_s)``; ``None`` when none is feasible.
+    rho_sde
+        ``sup_t ||X*_t - x'_t||_{L_2p}`` with a known diffusion, else ``None``.
+    rho
+        ``rho_TaSIL + rho_L1 (+ rho_sde)`` (DRIP eq. TotalTIG), ``None`` unless both parts exist.
+    """
+
+    rho_tasil: float | None
+    delta_tasil: float | None
+    rho_l1: float | None
+    p: int
+    kappa: float | None
+    delta_l1: float | None
+    design: tuple[float, float, float] | None
+    rho_sde: float | None
+    rho: float | None
+
+    @classmethod
+    def of(cls, cert: Any) -> Claims:
+        """The claims of ``cert`` (a :class:`Certificate` or an object with its attributes)."""
+        l1 = cert.l1
+        design = l1.design if (l1 is not None and l1.feasible) else None
+        coords = cert.coordinates
+        kappa = design.kappa if design is not None else None
+        if kappa is not None and coords is not None:
+            kappa = coords.gap_in_x(kappa)  # P(||x gap|| >= F kappa) <= P(||z gap|| >= kappa)
+        return cls(
+            rho_tasil=cert.rho_tasil,
+            delta_tasil=cert.tasil.delta if cert.tasil is not None else None,
+            rho_l1=cert.rho_l1,
+            p=design.p if design is not None else 1,
+            kappa=kappa,
+            delta_l1=design.delta if design is not None else None,
+            design=None
+            if design is None
+            else (float(design.omega), float(design.lambda_s), float(design.Ts)),
+            rho_sde=cert.rho_sde,
+            rho=cert.rho,
+        )
 
 
 @dataclass(frozen=True)
@@ -332,6 +396,11 @@ class Certificate:
             return None
         total = up(self.rho_tasil + self.rho_l1)
         return total if self.rho_sde is None else up(total + self.rho_sde)
+
+    def claims(self) -> Claims:
+        """What this certificate claims, in the user's ``x`` (:class:`Claims`): the one reading
+        of the bounds that ``validate`` and ``validate --data`` check."""
+        return Claims.of(self)
 
     def to_dict(self) -> dict[str, Any]:
         ce = self.contraction_expert
@@ -679,74 +748,140 @@ def _demonstrations_in_z(demos: DemonstrationSet, change: CoordinateChange) -> D
 
 
 def _certify_in(spec: Spec, demonstrations: DemonstrationSet | None, stage: Stages) -> Certificate:
-    """The certificate of ``spec`` in its own coordinates (see :func:`certify`)."""
-    s = spec.system
-    settings = spec.settings
-    opts = settings.contraction  # validated at load (its region contains the support)
-    given = settings.constants
+    """The certificate of ``spec`` in its own coordinates (see :func:`certify`): one call per
+    part, in the order their checks, notes and skipped parts appear in the certificate."""
+    s, settings = spec.system, spec.settings
+    k = _constants_part(s, settings, stage)
+    c = _contraction_part(s, settings.contraction, k, stage)
+    a = _l1drac_assumptions(s, settings, k, c)
+    d = _delta_iss_part(c, k)
+    t = _tasil_part(s, settings, demonstrations, k, c, d, stage)
+    l1 = _l1drac_part(s, settings, k, a, stage) if a.wanted else _L1Part(None, (), ())
+    return Certificate(
+        system=s,
+        assumptions=(*c.checks, *a.checks, *t.checks, *l1.checks),
+        inputs=k.ic,
+        uncertainty=k.uc,
+        contraction_expert=c.expert,
+        contraction_learned=c.learned,
+        delta_iss=d.result,
+        l1=l1.section,
+        tasil=t.section,
+        tasil_provenance=t.provenance,
+        notes=(*spec.notes, *c.notes, *d.notes, *t.notes, *l1.notes),
+        invariance=c.invariance,
+        extra_quantities=(*([] if d.gamma0 is None else [d.gamma0]), *t.quantities),
+        skipped=(*a.skipped, *t.skipped),
+        fingerprint=fingerprint_of(s, _deployed_design(l1.section)),
+    )
+
+
+@dataclass(frozen=True)
+class _Constants:
+    """The input and uncertainty constants and DRIP Assumption 1 (its scope not yet set)."""
+
+    g_box: np.ndarray | None  #: the box of every sup ||g||, for a state-dependent g
+    ic: InputConstants
+    uc: UncertaintyConstants
+    a1: Check
+
+
+def _constants_part(s: System, settings: Settings, stage: Stages) -> _Constants:
+    """The growth, Lipschitz and Hoelder bounds, and DRIP Assumption 1 on them."""
     stage("input and uncertainty constants (growth, Lipschitz, Hoelder bounds)")
     # a state-dependent g: every sup ||g|| over the box where the expert's rate is computed, the
     # set the trajectories must be proved to stay in (docs/math/contraction.md section 6)
-    g_box = _g_box(s, opts)
+    g_box = _g_box(s, settings.contraction)  # region validated at load (contains the support)
     ic = input_constants(s, g_box)
-    uc = uncertainty_constants(s, given)
-    notes: list[str] = list(spec.notes)  # how the spec defined the system (a K / LQR expert)
-    checks: list[Check] = []
-    extra_q: list[Quantity] = []
-    wants_l1 = "l1drac" in settings.present and g_box is None
-
+    uc = uncertainty_constants(s, settings.constants)
     a1_inputs = [ic.Delta_g, uc["Delta_mu"], uc["Delta_sigma"]]
     a1_finite = all(math.isfinite(q.value) for q in a1_inputs)
-    checks.append(
-        Check.derive(
-            "DRIP-A1",
-            ic.rank.value == s.m and a1_finite,
-            (
-                f"g has full column rank m = {s.m} (smallest singular value >= "
-                f"{ic.min_singular_value.value:.4g}, {ic.rank.how.value}); Delta_g = "
-                f"{ic.Delta_g.value:.6g} (Frobenius), {ic.Delta_g_spectral.value:.6g} (spectral); "
-                f"Delta_mu = {uc['Delta_mu'].value:.6g} ({uc['Delta_mu'].how.value}), "
-                f"Delta_sigma = {uc['Delta_sigma'].value:.6g} ({uc['Delta_sigma'].how.value})"
-                + ("" if a1_finite else "; a growth bound is not finite")
-            ),
-            inputs=[ic.rank, ic.min_singular_value, *a1_inputs],
-            lhs=float(ic.rank.value),
-            rhs=float(s.m),
-            margin=ic.min_singular_value.value,
-            source="DRIP Assumption 1",
-        )
+    a1 = Check.derive(
+        "DRIP-A1",
+        ic.rank.value == s.m and a1_finite,
+        (
+            f"g has full column rank m = {s.m} (smallest singular value >= "
+            f"{ic.min_singular_value.value:.4g}, {ic.rank.how.value}); Delta_g = "
+            f"{ic.Delta_g.value:.6g} (Frobenius), {ic.Delta_g_spectral.value:.6g} (spectral); "
+            f"Delta_mu = {uc['Delta_mu'].value:.6g} ({uc['Delta_mu'].how.value}), "
+            f"Delta_sigma = {uc['Delta_sigma'].value:.6g} ({uc['Delta_sigma'].how.value})"
+            + ("" if a1_finite else "; a growth bound is not finite")
+        ),
+        inputs=[ic.rank, ic.min_singular_value, *a1_inputs],
+        lhs=float(ic.rank.value),
+        rhs=float(s.m),
+        margin=ic.min_singular_value.value,
+        source="DRIP Assumption 1",
     )
+    return _Constants(g_box, ic, uc, a1)
 
+
+@dataclass(frozen=True)
+class _ContractionPart:
+    """The contraction rates, the invariant set and DRIP Assumptions 1 (scoped) and 2."""
+
+    expert: ContractionAnalysis
+    learned: ContractionAnalysis | None  #: None without a learned policy
+    invariance: InvariantSet | None
+    lam_ex: Quantity  #: the expert's rate
+    checks: tuple[Check, ...]  #: DRIP-A1, DRIP-A2
+    notes: tuple[str, ...]
+
+
+def _contraction_part(
+    s: System, opts: ContractionSettings, k: _Constants, stage: Stages
+) -> _ContractionPart:
+    """The expert's rate, a forward-invariant set where it is used, the learned loop's rate."""
     stage("contraction rate of the expert closed loop")
     ce = analyse_contraction(s, "expert", opts)
     r = ce.euclidean
     stage("forward-invariant set (where the expert's rate is used)")
-    inv = _invariance(s, r, g_box)
-    if g_box is not None:
-        checks[-1] = checks[-1].with_scope(*_g_scope(g_box, inv))
+    inv = _invariance(s, r, k.g_box)
+    a1 = k.a1 if k.g_box is None else k.a1.with_scope(*_g_scope(k.g_box, inv))
     a2 = _rate_check("DRIP-A2", r, "expert closed loop", "DRIP Assumption 2")
-    checks.append(a2.with_scope(*_expert_scope(r, inv, s.horizon)))
     lam_ex = r.to_quantity()
-
+    notes: list[str] = []
     cl = None
     if s.learned is not None:
         stage("contraction rate of the learned closed loop")
         cl = _learned_contraction(s, opts, lam_ex, notes)
-        rl = cl.euclidean
+    return _ContractionPart(
+        ce, cl, inv, lam_ex, (a1, a2.with_scope(*_expert_scope(r, inv, s.horizon))), tuple(notes)
+    )
+
+
+@dataclass(frozen=True)
+class _L1Assumptions:
+    """L1-DRAC Assumptions 2 (learned loop) and 7, or why the L1-DRAC part is skipped."""
+
+    wanted: bool  #: an [l1drac] table and a g free of x
+    source: ContractionAnalysis  #: L1-DRAC's nominal loop: the learned one, else the expert's
+    checks: tuple[Check, ...]
+    skipped: tuple[tuple[str, str, str], ...]
+
+
+def _l1drac_assumptions(
+    s: System, settings: Settings, k: _Constants, c: _ContractionPart
+) -> _L1Assumptions:
+    """The assumptions of the L1-DRAC layer on the contraction part (part of the verdict only
+    when the L1-DRAC part is requested)."""
+    wanted = "l1drac" in settings.present and k.g_box is None
+    src = c.learned if c.learned is not None else c.expert
+    checks: list[Check] = []
+    skipped: list[tuple[str, str, str]] = []
+    if c.learned is not None and wanted:
+        rl = c.learned.euclidean
         a2l = _rate_check(
             "L1DRAC-A2",
             rl,
             "learned closed loop (the nominal system of the L1-DRAC layer)",
             "L1-DRAC Assumption 2",
         )
-        if wants_l1:
-            checks.append(a2l.with_scope(*_sde_scope(rl.scope, s.horizon)))
-    src = cl if cl is not None else ce
-    skipped: list[tuple[str, str, str]] = []
-    if wants_l1:
-        a7 = _unmatched_check(src.euclidean.to_quantity(), ic, uc)
+        checks.append(a2l.with_scope(*_sde_scope(rl.scope, s.horizon)))
+    if wanted:
+        a7 = _unmatched_check(src.euclidean.to_quantity(), k.ic, k.uc)
         checks.append(a7.with_scope(*_sde_scope(a7.scope, s.horizon)))
-    elif g_box is not None:
+    elif k.g_box is not None:
         skipped.append(("l1drac", "not_applicable", G_X_L1_REASON))
     else:
         skipped.append(
@@ -758,192 +893,221 @@ def _certify_in(spec: Spec, demonstrations: DemonstrationSet | None, stage: Stag
                 "are not part of the verdict; add an [l1drac] table to certify it",
             )
         )
+    return _L1Assumptions(wanted, src, tuple(checks), tuple(skipped))
 
-    diss = None
-    gamma0 = None
-    if r.holds:
-        try:
-            diss = delta_iss(lam_ex, ic.Delta_g, ic.Delta_g_spectral)
-        except AssumptionViolation as exc:  # pragma: no cover - guarded by r.holds
-            notes.append(str(exc))
-        else:
-            gamma0 = _input_gain(
-                "gamma0", ic.Delta_g_spectral, lam_ex, "delta-ISS gain (comparison lemma)"
-            )
-            extra_q.append(gamma0)
-    else:
-        notes.append("no delta-ISS gain: the expert closed loop is not shown to contract")
 
-    tasil_prov: dict[str, Any] = {}
-    tasil = None
-    if s.learned is None:
-        skipped.append(
-            (
-                "tasil",
-                "not_applicable",
-                "no learned policy ([policy] learned or [tasil] policy): there is no imitation "
-                "gap to bound",
-            )
+@dataclass(frozen=True)
+class _DeltaISSPart:
+    """The delta-ISS gain of the expert closed loop and ``gamma0`` (comparison lemma)."""
+
+    result: DeltaISSResult | None
+    gamma0: Quantity | None  #: None when the expert loop is not shown to contract
+    notes: tuple[str, ...]
+
+
+def _delta_iss_part(c: _ContractionPart, k: _Constants) -> _DeltaISSPart:
+    """delta-ISS of the expert loop from its rate and ``Delta_g``."""
+    if not c.expert.euclidean.holds:
+        return _DeltaISSPart(
+            None, None, ("no delta-ISS gain: the expert closed loop is not shown to contract",)
         )
-    elif "tasil" not in settings.present:
+    try:
+        diss = delta_iss(c.lam_ex, k.ic.Delta_g, k.ic.Delta_g_spectral)
+    except AssumptionViolation as exc:  # pragma: no cover - guarded by r.holds
+        return _DeltaISSPart(None, None, (str(exc),))
+    gamma0 = _input_gain(
+        "gamma0", k.ic.Delta_g_spectral, c.lam_ex, "delta-ISS gain (comparison lemma)"
+    )
+    return _DeltaISSPart(diss, gamma0, ())
+
+
+@dataclass(frozen=True)
+class _TasilPart:
+    """The TaSIL section, its check, and the quantities it rests on (``gamma0`` apart)."""
+
+    section: TasilCertificate | None
+    provenance: Mapping[str, Any]
+    quantities: tuple[Quantity, ...]
+    checks: tuple[Check, ...]
+    skipped: tuple[tuple[str, str, str], ...]
+    notes: tuple[str, ...]
+
+
+def _tasil_part(
+    s: System,
+    settings: Settings,
+    demonstrations: DemonstrationSet | None,
+    k: _Constants,
+    c: _ContractionPart,
+    d: _DeltaISSPart,
+    stage: Stages,
+) -> _TasilPart:
+    """``rho_TaSIL`` (always computed when a learned policy exists; docs/math/tasil.md 3-4)."""
+    notes: list[str] = []
+    lam_ex = c.lam_ex
+    if s.learned is None:
+        why = (
+            "no learned policy ([policy] learned or [tasil] policy): there is no imitation "
+            "gap to bound"
+        )
+        return _TasilPart(None, {}, (), (), (("tasil", "not_applicable", why),), ())
+    if "tasil" not in settings.present:
         notes.append(
             "no [tasil] table: the TaSIL part is computed with the default settings "
             f"({_tasil_defaults_text(settings.tasil)})"
         )
-    if s.learned is not None and gamma0 is None:
+    gamma0 = d.gamma0
+    if gamma0 is None:
         # no bound on the imitation gap without the expert's contraction: the part fails
-        checks.append(
-            Check.derive(
-                "TaSIL",
-                False,
-                "rho_TaSIL not computed: the expert closed loop is not shown to contract (DRIP "
-                "Assumption 2), so there is no delta-ISS gain to carry the policy error",
-                inputs=[lam_ex],
-                source="DRIP Theorem thm:TaSIL",
-            )
-        )
-    if s.learned is not None and gamma0 is not None:
-        from drip_cert.bounds.tasil.section import (  # jax: keep off the API's import path
-            tasil_section,
-        )
-        from drip_cert.learn.imitation import (  # jax: keep off the API's import path
-            demonstration_set,
-        )
-
-        st = settings.tasil
-        stage("TaSIL section (demonstrations, h0 and h1 along them, the bound)")
-        demos = demonstration_set(s, st) if demonstrations is None else demonstrations
-        train, held = demos.train, demos.heldout
-        room = math.inf if inv is None else (inv.room if inv.proved else math.inf)
-        # the comparison bound needs the learned loop to contract on all of R^n, proved
-        cmp_gain = None
-        if cl is not None and cl.euclidean.holds and cl.euclidean.scope.all_x:
-            lam_il = cl.euclidean.to_quantity()
-            if lam_il.how != How.ESTIMATE and lam_il.value > 0:
-                cmp_gain = _input_gain(
-                    "gamma_IL",
-                    ic.Delta_g_spectral,
-                    lam_il.renamed("lambda_learned"),
-                    "comparison bound of the learned loop on [0, T] (docs/math/tasil.md 3.7)",
-                    horizon=s.horizon,
-                )
-        uniform_h0 = tube = None
-        if cmp_gain is not None:
-            stage("sup of ||pi_IL - pi*|| over a set holding every expert trajectory")
-            uniform_h0, S_inv = _uniform_h0(s, r, inv, notes)
-            if cl is not None:
-                stage("the same sup along the expert's contraction tube (TaSIL section 3.10)")
-                tube = expert_tube_bound(s, S_inv, r, cl.euclidean, ic.Delta_g_spectral, uniform_h0)
-        tasil, tasil_prov, tq = tasil_section(
-            s,
-            train,
-            held,
-            gamma0,
-            st,
-            room=room,
-            speed_sound=r.scope.all_x or (inv is not None and inv.proved),
-            method=f"{st.method}-{st.order}",
-            comparison_gain=cmp_gain,
-            uniform_h0=uniform_h0,
-            tube=tube,
-        )
-        extra_q.extend(q for q in tq if q.name != "gamma0")
-    if tasil is not None:
-        ok = tasil.rho is not None and math.isfinite(tasil.rho)
-        # why rho is infinite: the lemma's failure, else the failing form's own reason
-        why = tasil.gap_reason or next(
-            (f"{f.name}: {f.note}" for f in tasil.forms if f.name == tasil.rho_form), ""
-        )
-        tcheck = Check.derive(
+        fail = Check.derive(
             "TaSIL",
-            ok,
-            "rho_TaSIL = "
-            + (f"{tasil.rho:.6g}" if ok else "inf")
-            + f" ({tasil.rho_form}); deterministic gap bound over the given initial "
-            f"states {tasil.gap_bound:.6g}" + ("" if ok or not why else f"; {why}"),
-            inputs=[*extra_q, lam_ex],
-            method=How.SOUND,
-            lhs=float(tasil.rho) if ok else math.inf,
-            rhs=math.inf,
-            source="docs/math/tasil.md sections 3-4 (this project's construction)",
+            False,
+            "rho_TaSIL not computed: the expert closed loop is not shown to contract (DRIP "
+            "Assumption 2), so there is no delta-ISS gain to carry the policy error",
+            inputs=[lam_ex],
+            source="DRIP Theorem thm:TaSIL",
         )
-        checks.append(tcheck.with_scope(*_tasil_scope(r, inv, tasil, s.horizon, g_box)))
-    l1 = None
-    if wants_l1:
-        stage("L1-DRAC constants, design and its verification in Arb")
-        lam_q = src.euclidean.to_quantity()
-        est = -src.euclidean.max_mu_sampled
-        # a sampled rate below float resolution (e.g. 5e-324 for a loop with mu_2 = 0 exactly) is
-        # no evidence of contraction: no design on it (it also underflows the designer's logs)
-        if lam_q.value <= 0 and est > EST_RATE_FLOOR:
-            # the rigorous route did not establish contraction but sampling suggests it: design
-            # with the estimate, labelled so; the L1DRAC-A2 check above stays failed
-            lam_q = Quantity.derive(
-                "lambda",
-                est,
-                inputs=[lam_q],
-                method=How.ESTIMATE,
-                source=lam_q.source,
-                note="sampled estimate of the rate (the sound bound did not establish "
-                "contraction): the L1-DRAC design below is conditional on it",
-            )
-            notes.append(
-                "the L1-DRAC design uses a sampled estimate of the contraction rate of "
-                f"the {src.policy} closed loop ({est:.6g}); it is not certified"
-            )
-        l1 = l1_section(
-            s,
-            settings.l1drac,
-            given,
-            lam_q,
-            lam_q.scope.all_x,
-            src.policy,
-            {q.name: q for q in ic.quantities()},
-            uc.values,
-        )
-        design_inputs = list(l1.constants.values())
-        design_values = l1.design.to_dict() if l1.design is not None else {}
-        dcheck = Check.derive(
-            "L1DRAC-design",
-            l1.feasible,
-            (
-                (
-                    "conditional on the ESTIMATED rate lambda = " + f"{lam_q.value:.6g}: "
-                    if lam_q.how == How.ESTIMATE
-                    else ""
-                )
-                + (
-                    "feasible design: "
-                    + ", ".join(
-                        f"{k} = {design_values[k]:.6g}"
-                        for k in ("omega", "lambda_s", "Ts", "rho_r", "rho_a", "rho")
-                    )
-                    if l1.feasible
-                    else "no feasible design: "
-                    + (l1.design.reason if l1.design is not None else l1.error)
-                )
-            ),
-            inputs=design_inputs,
-            source="L1-DRAC (16), (21), (24)",
-        )
-        checks.append(dcheck.with_scope(*_sde_scope(dcheck.scope, s.horizon)))
-    return Certificate(
-        system=s,
-        assumptions=tuple(checks),
-        inputs=ic,
-        uncertainty=uc,
-        contraction_expert=ce,
-        contraction_learned=cl,
-        delta_iss=diss,
-        l1=l1,
-        tasil=tasil,
-        tasil_provenance=tasil_prov,
-        notes=tuple(notes),
-        invariance=inv,
-        extra_quantities=tuple(extra_q),
-        skipped=tuple(skipped),
-        fingerprint=fingerprint_of(s, _deployed_design(l1)),
+        return _TasilPart(None, {}, (), (fail,), (), tuple(notes))
+    from drip_cert.bounds.tasil.section import (  # jax: keep off the API's import path
+        tasil_section,
     )
+    from drip_cert.learn.imitation import (  # jax: keep off the API's import path
+        demonstration_set,
+    )
+
+    r, inv, cl, ic = c.expert.euclidean, c.invariance, c.learned, k.ic
+    st = settings.tasil
+    stage("TaSIL section (demonstrations, h0 and h1 along them, the bound)")
+    demos = demonstration_set(s, st) if demonstrations is None else demonstrations
+    train, held = demos.train, demos.heldout
+    room = math.inf if inv is None else (inv.room if inv.proved else math.inf)
+    # the comparison bound needs the learned loop to contract on all of R^n, proved
+    cmp_gain = None
+    if cl is not None and cl.euclidean.holds and cl.euclidean.scope.all_x:
+        lam_il = cl.euclidean.to_quantity()
+        if lam_il.how != How.ESTIMATE and lam_il.value > 0:
+            cmp_gain = _input_gain(
+                "gamma_IL",
+                ic.Delta_g_spectral,
+                lam_il.renamed("lambda_learned"),
+                "comparison bound of the learned loop on [0, T] (docs/math/tasil.md 3.7)",
+                horizon=s.horizon,
+            )
+    uniform_h0 = tube = None
+    if cmp_gain is not None:
+        stage("sup of ||pi_IL - pi*|| over a set holding every expert trajectory")
+        uniform_h0, S_inv = _uniform_h0(s, r, inv, notes)
+        if cl is not None:
+            stage("the same sup along the expert's contraction tube (TaSIL section 3.10)")
+            tube = expert_tube_bound(s, S_inv, r, cl.euclidean, ic.Delta_g_spectral, uniform_h0)
+    tasil, tasil_prov, tq = tasil_section(
+        s,
+        train,
+        held,
+        gamma0,
+        st,
+        room=room,
+        speed_sound=r.scope.all_x or (inv is not None and inv.proved),
+        method=f"{st.method}-{st.order}",
+        comparison_gain=cmp_gain,
+        uniform_h0=uniform_h0,
+        tube=tube,
+    )
+    quantities = tuple(q for q in tq if q.name != "gamma0")
+    ok = tasil.rho is not None and math.isfinite(tasil.rho)
+    # why rho is infinite: the lemma's failure, else the failing form's own reason
+    why = tasil.gap_reason or next(
+        (f"{f.name}: {f.note}" for f in tasil.forms if f.name == tasil.rho_form), ""
+    )
+    tcheck = Check.derive(
+        "TaSIL",
+        ok,
+        "rho_TaSIL = "
+        + (f"{tasil.rho:.6g}" if ok else "inf")
+        + f" ({tasil.rho_form}); deterministic gap bound over the given initial "
+        f"states {tasil.gap_bound:.6g}" + ("" if ok or not why else f"; {why}"),
+        inputs=[gamma0, *quantities, lam_ex],
+        method=How.SOUND,
+        lhs=float(tasil.rho) if ok else math.inf,
+        rhs=math.inf,
+        source="docs/math/tasil.md sections 3-4 (this project's construction)",
+    )
+    checks = (tcheck.with_scope(*_tasil_scope(r, inv, tasil, s.horizon, k.g_box)),)
+    return _TasilPart(tasil, tasil_prov, quantities, checks, (), tuple(notes))
+
+
+@dataclass(frozen=True)
+class _L1Part:
+    """The L1-DRAC section (constants, design verified in Arb, ``rho_L1``, ``rho_sde``)."""
+
+    section: L1Section | None
+    checks: tuple[Check, ...]  #: L1DRAC-design
+    notes: tuple[str, ...]
+
+
+def _l1drac_part(
+    s: System, settings: Settings, k: _Constants, a: _L1Assumptions, stage: Stages
+) -> _L1Part:
+    """The L1-DRAC design on the rate of its nominal loop (L1-DRAC (16), (21), (24))."""
+    stage("L1-DRAC constants, design and its verification in Arb")
+    src = a.source
+    notes: list[str] = []
+    lam_q = src.euclidean.to_quantity()
+    est = -src.euclidean.max_mu_sampled
+    # a sampled rate below float resolution (e.g. 5e-324 for a loop with mu_2 = 0 exactly) is
+    # no evidence of contraction: no design on it (it also underflows the designer's logs)
+    if lam_q.value <= 0 and est > EST_RATE_FLOOR:
+        # the rigorous route did not establish contraction but sampling suggests it: design
+        # with the estimate, labelled so; the L1DRAC-A2 check above stays failed
+        lam_q = Quantity.derive(
+            "lambda",
+            est,
+            inputs=[lam_q],
+            method=How.ESTIMATE,
+            source=lam_q.source,
+            note="sampled estimate of the rate (the sound bound did not establish "
+            "contraction): the L1-DRAC design below is conditional on it",
+        )
+        notes.append(
+            "the L1-DRAC design uses a sampled estimate of the contraction rate of "
+            f"the {src.policy} closed loop ({est:.6g}); it is not certified"
+        )
+    l1 = l1_section(
+        s,
+        settings.l1drac,
+        settings.constants,
+        lam_q,
+        lam_q.scope.all_x,
+        src.policy,
+        {q.name: q for q in k.ic.quantities()},
+        k.uc.values,
+    )
+    design_inputs = list(l1.constants.values())
+    design_values = l1.design.to_dict() if l1.design is not None else {}
+    dcheck = Check.derive(
+        "L1DRAC-design",
+        l1.feasible,
+        (
+            (
+                "conditional on the ESTIMATED rate lambda = " + f"{lam_q.value:.6g}: "
+                if lam_q.how == How.ESTIMATE
+                else ""
+            )
+            + (
+                "feasible design: "
+                + ", ".join(
+                    f"{key} = {design_values[key]:.6g}"
+                    for key in ("omega", "lambda_s", "Ts", "rho_r", "rho_a", "rho")
+                )
+                if l1.feasible
+                else "no feasible design: "
+                + (l1.design.reason if l1.design is not None else l1.error)
+            )
+        ),
+        inputs=design_inputs,
+        source="L1-DRAC (16), (21), (24)",
+    )
+    return _L1Part(l1, (dcheck.with_scope(*_sde_scope(dcheck.scope, s.horizon)),), tuple(notes))
 
 
 def _unmatched_check(lam_l1: Quantity, ic: InputConstants, uc: UncertaintyConstants) -> Check:

@@ -30,6 +30,7 @@ import numpy as np
 
 from drip_cert.errors import SpecError
 from drip_cert.provenance import Scope
+from drip_cert.vocabulary import CONTRACTION_METHODS
 
 TABLES = ("constants", "contraction", "l1drac", "tasil", "simulation")
 """The settings tables of a spec, in the order of the README."""
@@ -493,7 +494,7 @@ def validate_declared(
 
 
 # ------------------------------------------------------------------------------ [contraction]
-CONTRACTION_METHODS = ("auto", "exact-linear", "interval-bnb", "sampled")
+# the route names are declared once, in drip_cert.vocabulary (their implementations: analysis)
 
 
 @dataclass(frozen=True)

@@ -823,22 +823,15 @@ def validate_data(
     check_fits(data, n_state=n_state, certified_horizon=certified_horizon)
     warning = check_fingerprint(cert, data, accept_unfingerprinted=accept_unfingerprinted)
     T_end = float(data.times[-1])
-    # the certified numbers in the user's x, as drip_cert.validate.run.validate reads them
-    design = cert.l1.design if (cert.l1 is not None and cert.l1.feasible) else None
-    coords = getattr(cert, "coordinates", None)
-    rho_tasil = cert.rho_tasil
-    delta_tasil = cert.tasil.delta if cert.tasil is not None else None
-    rho_l1 = cert.rho_l1
-    p = design.p if design is not None else 1
-    kappa = design.kappa if design is not None else None
-    if kappa is not None and coords is not None:
-        kappa = coords.gap_in_x(kappa)  # P(||x gap|| >= F kappa) <= P(||z gap|| >= kappa)
-    delta_l1 = design.delta if design is not None else None
+    # the certified numbers in the user's x (Certificate.claims: validate reads the same)
+    c = cert.claims()
+    rho_tasil, delta_tasil, rho_l1 = c.rho_tasil, c.delta_tasil, c.rho_l1
+    p, kappa, delta_l1 = c.p, c.kappa, c.delta_l1
     notes: list[str] = [] if warning is None else ["WARNING: " + warning]
-    at_cert = design is not None
+    at_cert = c.design is not None
     why = "no feasible L1-DRAC design"
-    if design is not None:
-        cert_design = (float(design.omega), float(design.lambda_s), float(design.Ts))
+    if c.design is not None:
+        cert_design = c.design
         if data.l1_design is None:
             notes.append(
                 "the data do not say which L1-DRAC parameters produced them (no l1_design): "
@@ -967,8 +960,8 @@ def validate_data(
         certified_horizon=float(certified_horizon),
         l1_parameters=(
             {}
-            if design is None
-            else {"omega": design.omega, "lambda_s": design.lambda_s, "Ts": design.Ts}
+            if c.design is None
+            else dict(zip(("omega", "lambda_s", "Ts"), c.design, strict=True))
         ),
         diverged_fraction={
             s: frac for s in (data.scenarios if data.kind == "trajectories" else ("all paths",))

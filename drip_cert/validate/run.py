@@ -269,14 +269,9 @@ def validate(
                 "parameters and no uncertainty bound is checked"
             )
     # the bounds in the user's x (mapped back when the certificate is in z): the gaps are too
-    rho_tasil = cert.rho_tasil
-    delta_tasil = cert.tasil.delta if cert.tasil is not None else None
-    rho_l1 = cert.rho_l1
-    p = design.p if design is not None else 1
-    kappa = design.kappa if design is not None else None
-    if kappa is not None and coords is not None:
-        kappa = coords.gap_in_x(kappa)  # P(||x gap|| >= F kappa) <= P(||z gap|| >= kappa)
-    delta_l1 = design.delta if design is not None else None
+    c = cert.claims()
+    rho_tasil, delta_tasil, rho_l1 = c.rho_tasil, c.delta_tasil, c.rho_l1
+    p, kappa, delta_l1 = c.p, c.kappa, c.delta_l1
     why = "no feasible L1-DRAC design" if design is None else "practical T_s, see the notes"
     with_l1 = not s.g_depends_on_x
     if not with_l1:
