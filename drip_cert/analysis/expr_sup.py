@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import functools
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 import sympy as sp
@@ -43,6 +44,17 @@ RESULT_CACHE = 256  #: suprema kept: a certify asks for the same one several tim
 ENCLOSURE_CACHE = 64  #: compiled batched enclosures kept (one per objective and variable list)
 
 _EVAL_ERRORS = (UnsupportedExpression, ZeroDivisionError, OverflowError, ValueError)
+
+
+def _first_lambdify(forms: Sequence[sp.Expr], variables: Sequence[sp.Symbol], module: str) -> Any:
+    """The first of ``forms`` that ``sympy.lambdify`` can compile for ``module`` (``None`` when
+    none can): the search's lower values are optional, so an unusual node only costs them."""
+    for c in forms:
+        try:
+            return sp.lambdify(list(variables), c, module)
+        except Exception:  # noqa: BLE001 - lambdify of unusual nodes; lower values are optional
+            continue
+    return None
 
 
 def expr_sup(
@@ -108,13 +120,7 @@ def _expr_sup(
             continue
     if not encs:
         return BnbResult(np.inf, -np.inf, None, 0, False, "max_boxes")
-    point = None
-    for c in cands:
-        try:
-            point = sp.lambdify(list(variables), c, "math")
-            break
-        except Exception:  # noqa: BLE001 - lambdify of unusual nodes; lower values are optional
-            continue
+    point = _first_lambdify(cands, variables, "math")
 
     def upper(b: np.ndarray) -> float:
         best = np.inf
@@ -129,7 +135,7 @@ def _expr_sup(
 
     def value(pt: np.ndarray) -> float:
         try:
-            return float(point(*pt.tolist()))  # type: ignore[misc]
+            return float(point(*pt.tolist()))
         except (ValueError, ZeroDivisionError, OverflowError, TypeError):
             return np.nan
 
@@ -170,13 +176,7 @@ def _expr_sup_batched(
 ) -> BnbResult:
     """:func:`expr_sup` with many boxes per enclosure call."""
     d = len(variables)
-    fn = None
-    for c in forms:
-        try:
-            fn = sp.lambdify(list(variables), c, "numpy")
-            break
-        except Exception:  # noqa: BLE001 - lambdify of unusual nodes; lower values are optional
-            continue
+    fn = _first_lambdify(forms, variables, "numpy")
 
     def upper_many(bs: np.ndarray) -> np.ndarray:
         best = np.full(bs.shape[0], np.inf)
