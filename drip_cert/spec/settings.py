@@ -21,6 +21,7 @@ import dataclasses
 import difflib
 import json
 import math
+import re
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from types import MappingProxyType
@@ -29,6 +30,7 @@ from typing import Any, ClassVar, TypedDict, cast
 import numpy as np
 
 from drip_cert.errors import SpecError
+from drip_cert.model.literals import DecimalFloat
 from drip_cert.provenance import Scope
 from drip_cert.vocabulary import CONTRACTION_METHODS
 
@@ -90,18 +92,45 @@ _ELSEWHERE = {
 
 
 # ------------------------------------------------------------------------------ field readers
-def toml_text(value: Any) -> str:
-    """``value`` as it would be written in TOML (for messages)."""
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    if isinstance(value, str):
-        return json.dumps(value)
-    if isinstance(value, float):
-        if math.isnan(value):
-            return "nan"
-        if math.isinf(value):
-            return "inf" if value > 0 else "-inf"
-        return repr(value)
+_BARE_KEY = re.compile(r"^[A-Za-z0-9_-]+$")
+
+
+def toml_key(key: Any) -> str:
+    """A TOML key: bare when it may be, else a quoted (basic string) key."""
+    key = str(key)
+    return key if _BARE_KEY.match(key) else json.dumps(key)
+
+
+def toml_text(value: Any, *, strict: bool = False, where: str = "") -> str:
+    """``value`` as it is written in TOML: for messages, and (``strict``) for the specs
+    ``drip-cert train --write-spec`` writes. A :class:`~drip_cert.model.literals.DecimalFloat`
+    keeps the text it was read from. A value TOML cannot hold is its ``repr`` in a message, and a
+    SpecError naming ``where`` when ``strict``."""
+
+    def text(v: Any) -> str:
+        if isinstance(v, bool):
+            return "true" if v else "false"
+        if isinstance(v, DecimalFloat):
+            return v.text
+        if isinstance(v, int):
+            return str(v)
+        if isinstance(v, str):
+            return json.dumps(v)  # a TOML basic string: JSON's escapes are TOML's
+        if isinstance(v, float):
+            if math.isnan(v):
+                return "nan"
+            if math.isinf(v):
+                return "inf" if v > 0 else "-inf"
+            return repr(v)
+        if isinstance(v, Mapping):
+            return "{ " + ", ".join(f"{toml_key(k)} = {text(x)}" for k, x in v.items()) + " }"
+        if isinstance(v, list | tuple):
+            return "[" + ", ".join(text(x) for x in v) + "]"
+        if strict:
+            raise SpecError(f"cannot write {type(v).__name__} {v!r} as a spec value", field=where)
+        return repr(v)
+
+    return text(value)
     if isinstance(value, Mapping):
         return "{ " + ", ".join(f"{k} = {toml_text(v)}" for k, v in value.items()) + " }"
     if isinstance(value, list | tuple):

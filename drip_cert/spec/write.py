@@ -9,10 +9,7 @@ the result loads from where it is written. :func:`toml_document` renders such a 
 
 from __future__ import annotations
 
-import json
-import math
 import os
-import re
 import tomllib
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -20,10 +17,9 @@ from typing import Any
 
 from drip_cert.errors import SpecError
 from drip_cert.model.literals import DecimalFloat
+from drip_cert.spec.settings import toml_key, toml_text
 
 __all__ = ["read_document", "spec_with_policy", "toml_document"]
-
-_BARE_KEY = re.compile(r"^[A-Za-z0-9_-]+$")
 
 
 def read_document(path: str | os.PathLike[str]) -> dict[str, Any]:
@@ -125,27 +121,8 @@ def _emit_table(lines: list[str], prefix: str, table: Mapping[str, Any]) -> None
 
 
 def _key(k: Any) -> str:
-    k = str(k)
-    return k if _BARE_KEY.match(k) else json.dumps(k)
+    return toml_key(k)
 
 
 def _value(v: Any, where: str) -> str:
-    if isinstance(v, bool):
-        return "true" if v else "false"
-    if isinstance(v, DecimalFloat):
-        return v.text
-    if isinstance(v, int):
-        return str(v)
-    if isinstance(v, float):
-        if math.isnan(v):
-            return "nan"
-        if math.isinf(v):
-            return "inf" if v > 0 else "-inf"
-        return repr(v)
-    if isinstance(v, str):
-        return json.dumps(v)  # a TOML basic string: JSON's escapes are TOML's
-    if isinstance(v, Mapping):
-        return "{ " + ", ".join(f"{_key(k)} = {_value(x, where)}" for k, x in v.items()) + " }"
-    if isinstance(v, list | tuple):
-        return "[" + ", ".join(_value(x, where) for x in v) + "]"
-    raise SpecError(f"cannot write {type(v).__name__} {v!r} as a spec value", field=where)
+    return toml_text(v, strict=True, where=where)
