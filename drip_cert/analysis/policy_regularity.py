@@ -20,7 +20,7 @@ from drip_cert.analysis.mlp.derivatives import enclose_derivatives
 from drip_cert.model.blocks import block_applications
 from drip_cert.model.system import System
 from drip_cert.numerics.interval import UnsupportedExpression, compile_enclosure, enclose_expr
-from drip_cert.numerics.interval_np import iadd, imul
+from drip_cert.numerics.interval_np import affine_enclosure, iadd, imul
 from drip_cert.numerics.rounding import (
     add_up,
     add_up_np,
@@ -35,16 +35,22 @@ from drip_cert.numerics.rounding import (
 from drip_cert.provenance import How, Quantity, Scope
 
 __all__ = [
-    "LOCAL_SUBBOXES",
+    "LOCAL_GRID",
+    "LOCAL_MAX_BOXES",
+    "LOCAL_SPLIT",
     "difference_jacobian_lipschitz",
     "jacobian_lipschitz",
     "local_jacobian_lipschitz",
 ]
 
-#: Sub-boxes of the local route (:func:`local_jacobian_lipschitz`): the box is cut into ``k^n``
-#: equal sub-boxes with ``k^n <= LOCAL_SUBBOXES`` (a count of work, the same on every machine);
-#: 1024 gives 32 x 32 cells in 2-D and 5^4 in 4-D, one batched enclosure each.
-LOCAL_SUBBOXES = 1024
+#: The local route's work (:func:`local_jacobian_lipschitz`), counts, the same on every machine:
+#: a first grid of ``k^n <= LOCAL_GRID`` equal sub-boxes (16 x 16 in 2-D, 4^4 in 4-D), then
+#: rounds that bisect the ``LOCAL_SPLIT`` sub-boxes of largest bound, ``LOCAL_MAX_BOXES`` bounded
+#: sub-boxes in all (the bound is first order in the sub-box width: refining where it is largest
+#: is what lowers the maximum).
+LOCAL_GRID = 256
+LOCAL_SPLIT = 256
+LOCAL_MAX_BOXES = 8192
 
 
 def jacobian_lipschitz(s: System, which: str, box: np.ndarray | None = None) -> Quantity:
@@ -225,57 +231,90 @@ def local_jacobian_lipschitz(
     split = _split_blocks(pol, s)
     if split is None:
         return None
-    rest, C = split
+    rest, terms = split
     box = np.asarray(box, dtype=float)
     n, m = s.n, len(rest)
+    x = list(s.states)
+    try:
+        second = [
+            [
+                [
+                    compile_enclosure(d2, x) if (d2 := sp.diff(r, x[a], x[b])) != 0 else None
+                    for b in range(n)
+                ]
+                for a in range(n)
+            ]
+            for r in rest
+        ]
+    except UnsupportedExpression:
+        return None
+
+    def bound(LO: np.ndarray, HI: np.ndarray) -> np.ndarray:
+        """Per box, an upper bound of ``sup ||D^2 pol||_F`` over it."""
+        N = LO.shape[0]
+        Hlo, Hhi = np.zeros((N, m, n, n)), np.zeros((N, m, n, n))
+        for j in range(m):
+            for a in range(n):
+                for b in range(a, n):
+                    F = second[j][a][b]
+                    if F is None:
+                        continue
+                    for i in range(N):
+                        lo, hi = F(list(zip(LO[i], HI[i])))
+                        Hlo[i, j, a, b] = Hlo[i, j, b, a] = lo
+                        Hhi[i, j, a, b] = Hhi[i, j, b, a] = hi
+        for Cm, bname, M, c in terms:
+            mlp = s.blocks[bname].mlp
+            assert mlp is not None  # _split_blocks keeps MLP blocks only
+            tlo, thi = _block_hessian_in_x(mlp, M, c, LO, HI)
+            clo, chi = _converted(Cm)
+            for j in range(m):
+                for o in range(Cm.shape[1]):
+                    if Cm[j, o] == 0.0:
+                        continue
+                    plo, phi = imul(clo[j, o], chi[j, o], tlo[:, o], thi[:, o])
+                    Hlo[:, j], Hhi[:, j] = iadd(Hlo[:, j], Hhi[:, j], plo, phi)
+        mag = np.maximum(np.abs(Hlo), np.abs(Hhi)).reshape(N, -1)
+        return norm2_up_np(mag, axis=-1)
+
+    # a grid of LOCAL_GRID sub-boxes, then rounds that bisect the LOCAL_SPLIT boxes of largest
+    # bound along their widest side (relative to the box), LOCAL_MAX_BOXES bounded boxes in all
     k = 1
-    while (k + 1) ** n <= LOCAL_SUBBOXES:
+    while (k + 1) ** n <= LOCAL_GRID:
         k += 1
     edges = [np.linspace(lo, hi, k + 1) for lo, hi in box]  # ends exactly lo and hi
     idx = np.stack(np.meshgrid(*[np.arange(k)] * n, indexing="ij"), axis=-1).reshape(-1, n)
     LO = np.stack([edges[d][idx[:, d]] for d in range(n)], axis=1)
     HI = np.stack([edges[d][idx[:, d] + 1] for d in range(n)], axis=1)
-    N = LO.shape[0]
-    Hlo, Hhi = np.zeros((N, m, n, n)), np.zeros((N, m, n, n))
-    x = list(s.states)
-    try:
-        for j, r in enumerate(rest):
-            for a in range(n):
-                for b in range(a, n):
-                    d2 = sp.diff(r, x[a], x[b])
-                    if d2 == 0:
-                        continue
-                    F = compile_enclosure(d2, x)
-                    for i in range(N):
-                        lo, hi = F(list(zip(LO[i], HI[i])))
-                        Hlo[i, j, a, b] = Hlo[i, j, b, a] = lo
-                        Hhi[i, j, a, b] = Hhi[i, j, b, a] = hi
-    except UnsupportedExpression:
-        return None
-    notes = []
-    for bname, Cm in sorted(C.items()):
-        mlp = s.blocks[bname].mlp
-        assert mlp is not None  # _split_blocks keeps MLP blocks only
-        tlo, thi = enclose_derivatives(mlp, LO, HI, hessian=True).hessian  # type: ignore[misc]
-        crad = up_np(CONVERSION_ULPS * np.spacing(np.abs(Cm)))
-        clo, chi = sub_down_np(Cm, crad), add_up_np(Cm, crad)
-        for j in range(m):
-            for o in range(Cm.shape[1]):
-                if Cm[j, o] == 0.0:
-                    continue
-                plo, phi = imul(clo[j, o], chi[j, o], tlo[:, o], thi[:, o])
-                Hlo[:, j], Hhi[:, j] = iadd(Hlo[:, j], Hhi[:, j], plo, phi)
-        notes.append(bname)
-    mag = np.maximum(np.abs(Hlo), np.abs(Hhi)).reshape(N, -1)
-    val = float(np.max(norm2_up_np(mag, axis=-1)))
+    ub = bound(LO, HI)
+    work = LO.shape[0]
+    width = np.maximum(box[:, 1] - box[:, 0], np.finfo(float).tiny)
+    while work + 2 * LOCAL_SPLIT <= LOCAL_MAX_BOXES and np.isfinite(ub).all():
+        top = np.argsort(-ub, kind="stable")[:LOCAL_SPLIT]
+        keep = np.ones(ub.size, dtype=bool)
+        keep[top] = False
+        lo, hi = LO[top], HI[top]
+        d = np.argmax((hi - lo) / width, axis=1)
+        mid = lo[np.arange(d.size), d] + 0.5 * (hi - lo)[np.arange(d.size), d]
+        hi1, lo2 = hi.copy(), lo.copy()
+        hi1[np.arange(d.size), d] = mid  # the halves share the float mid: they cover the box
+        lo2[np.arange(d.size), d] = mid
+        cl, ch = np.concatenate([lo, lo2]), np.concatenate([hi1, hi])
+        LO, HI = np.concatenate([LO[keep], cl]), np.concatenate([HI[keep], ch])
+        ub = np.concatenate([ub[keep], bound(cl, ch)])
+        work += cl.shape[0]
+    N = work
+    names = ", ".join(sorted({t[1] for t in terms})) or "none"
+    val = float(np.max(ub))
     region = [[round(float(v), 4) for v in row] for row in box]
     return Quantity.derive(
         name,
         val,
         method=How.SOUND,
         source="DRIP Assumption PolicyRegularity (b)",
-        note=f"local route: Hessian of the whole expression enclosed on {N} sub-boxes of the box "
-        f"{region} (blocks {', '.join(notes) or 'none'} with slope ranges local to each "
+        note=f"local route: Hessian of the whole expression enclosed on {N} sub-boxes "
+        "(bisected where largest) of the box "
+        f"{region} (blocks {names} with slope ranges local to each "
         "sub-box, shared terms cancelling per sub-box), largest Frobenius norm: valid on that "
         "box only",
         scope=Scope(tuple(map(tuple, box))),
@@ -283,22 +322,41 @@ def local_jacobian_lipschitz(
 
 
 def _split_blocks(pol: sp.MatrixBase, s: System):
-    """``(r, C)`` with ``pol = r(x) + sum_h C[h] h(x)``: ``r`` a list of block-free expressions in
-    the states, ``C[h]`` a ``(m, out_h)`` float matrix; ``None`` when ``pol`` depends on ``t``,
-    is not linear with constant coefficients in the block outputs, or applies a block that is not
-    a smooth MLP to anything but the state."""
-    x = tuple(s.states)
+    """``(r, terms)`` with ``pol = r(x) + sum_k C_k h_k(M_k x + c_k)``: ``r`` a list of block-free
+    expressions in the states; each term ``(C, block, M, c)`` with ``C`` a ``(m, out)`` float
+    matrix and the block's argument affine in the states (``M`` ``(in, n)``, ``c``; the identity
+    for a block applied to the state, as after a change of coordinates ``x = Theta^-1 z`` it is
+    not). ``None`` when ``pol`` depends on ``t``, is not linear with constant coefficients in the
+    block outputs, differentiates a block, or applies one that is not a smooth MLP."""
+    x = list(s.states)
     apps = set()
     for e in pol:
         apps |= block_applications(e)
+    maps: dict[tuple, tuple[np.ndarray, np.ndarray]] = {}
     for a in apps:
         mlp = s.blocks[a.block_name].mlp
-        if a.deriv or tuple(a.args) != x or mlp is None or not mlp.smooth:
+        if a.deriv or mlp is None or not mlp.smooth or len(a.args) != mlp.in_dim:
             return None
+        key = (a.block_name, tuple(a.args))
+        if key in maps:
+            continue
+        M = np.zeros((len(a.args), len(x)))
+        c = np.zeros(len(a.args))
+        for i, arg in enumerate(a.args):
+            arg = sp.expand(sp.sympify(arg))
+            try:
+                P = sp.Poly(arg, *x)
+            except sp.PolynomialError:
+                return None
+            if P.total_degree() > 1 or any(v.free_symbols for v in P.coeffs()):
+                return None
+            M[i] = [float(P.coeff_monomial(xi)) for xi in x]
+            c[i] = float(P.coeff_monomial(1))
+        maps[key] = (M, c)
     syms = {a: sp.Dummy(f"z_{a.block_name}_{a.out_index}") for a in apps}
     zs = list(syms.values())
     rest: list[sp.Expr] = []
-    C: dict[str, np.ndarray] = {}
+    C: dict[tuple, np.ndarray] = {}
     for j, e in enumerate(pol):
         ez = sp.expand(sp.sympify(e).xreplace(syms))
         if s.t in ez.free_symbols:
@@ -316,11 +374,50 @@ def _split_blocks(pol: sp.MatrixBase, s: System):
             coef = P.coeff_monomial(z)
             if coef.free_symbols:
                 return None
+            key = (a.block_name, tuple(a.args))
             out = s.blocks[a.block_name].out_dim
-            M = C.setdefault(a.block_name, np.zeros((len(pol), out)))
-            M[j, a.out_index] += float(coef)
+            Cm = C.setdefault(key, np.zeros((len(pol), out)))
+            Cm[j, a.out_index] += float(coef)
         rest.append(P.coeff_monomial(1))
-    return rest, C
+    terms = [(Cm, key[0], *maps[key]) for key, Cm in sorted(C.items(), key=lambda kv: str(kv[0]))]
+    return rest, terms
+
+
+def _converted(v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """An interval around float coefficients read from sympy constants: ``CONVERSION_ULPS``
+    spacings each way (:data:`~drip_cert.analysis.closed_loop.CONVERSION_ULPS`)."""
+    rad = up_np(CONVERSION_ULPS * np.spacing(np.abs(v)))
+    return sub_down_np(v, rad), add_up_np(v, rad)
+
+
+def _block_hessian_in_x(mlp, M: np.ndarray, c: np.ndarray, LO: np.ndarray, HI: np.ndarray):
+    """Enclosure of the Hessian of ``x -> h(M x + c)``, ``M^T D^2 h(M x + c) M``, over the boxes
+    ``[LO, HI]`` (``(N, n)``): ``D^2 h`` enclosed over the interval hull of ``M [LO, HI] + c``
+    (outward rounded, widened by the coefficients' conversion error), then the two products with
+    the interval ``M`` entry by entry. Returns ``(lo, hi)`` of shape ``(N, out, n, n)``."""
+    N, n = LO.shape
+    if M.shape == (n, n) and np.array_equal(M, np.eye(n)) and not np.any(c):
+        return enclose_derivatives(mlp, LO, HI, hessian=True).hessian
+    Mlo, Mhi = _converted(M)
+    clo, chi = _converted(c)
+    ylo, yhi = affine_enclosure(M, c, LO, HI)
+    big = np.maximum(np.abs(LO), np.abs(HI))
+    slack = add_up_np(up_np(big @ (Mhi - Mlo).T), up_np(chi - clo))
+    ylo, yhi = sub_down_np(ylo, slack), add_up_np(yhi, slack)
+    hlo, hhi = enclose_derivatives(mlp, ylo, yhi, hessian=True).hessian  # (N, out, k, k)
+    k = M.shape[0]
+    out = hlo.shape[1]
+    tlo, thi = np.zeros((N, out, n, n)), np.zeros((N, out, n, n))
+    for i in range(n):
+        for l in range(n):  # noqa: E741
+            for a in range(k):
+                for b in range(k):
+                    plo, phi = imul(Mlo[a, i], Mhi[a, i], hlo[:, :, a, b], hhi[:, :, a, b])
+                    plo, phi = imul(plo, phi, Mlo[b, l], Mhi[b, l])
+                    tlo[:, :, i, l], thi[:, :, i, l] = iadd(
+                        tlo[:, :, i, l], thi[:, :, i, l], plo, phi
+                    )
+    return tlo, thi
 
 
 def _block_names(e: sp.Expr) -> set[str]:
