@@ -1,0 +1,53 @@
+"""``drip-cert train`` names the check that decides the verdict (issue 24): a failing check
+before any that holds on an unproved region, never a holding check for a verdict it does not
+decide, in the coordinates the certificate uses, with its margin and what to change."""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+from drip_cert.provenance import Check, How, verdict_of
+from drip_cert.workflows import _binding
+
+
+def _cert(checks, coordinates=None):
+    verdict, _ = verdict_of(checks)
+    return SimpleNamespace(
+        assumptions=tuple(checks),
+        coordinates=coordinates,
+        tasil=None,
+        verdict=verdict,
+        certified=verdict.value == "certified",
+        rho_tasil=None,
+        rho_l1=None,
+    )
+
+
+PROVED = Check("DRIP-A2", True, "expert rate", 0.0, 1.0, 1.0, how=How.SOUND)
+ON_A_BOX = Check(
+    "L1DRAC-A2", True, "learned rate on a box", -0.7, 0.0, 0.7, how=How.SOUND
+).with_scope(False, "a rate on a box does not suffice")
+FAILS = Check("L1DRAC-design", False, "no feasible design", 2.0, 1.0, -1.0, how=How.SOUND)
+
+
+def test_a_failing_check_binds_before_one_that_holds_on_a_box():
+    b = _binding(_cert([PROVED, ON_A_BOX, FAILS]))
+    assert b["verdict"] == "not_certified"
+    assert b["check"] == "L1DRAC-design" and b["role"] == "fails" and not b["holds"]
+    assert b["margin"] == -1.0
+
+
+def test_a_conditional_verdict_names_the_unproved_check_without_calling_it_binding_margin():
+    b = _binding(_cert([PROVED, ON_A_BOX]))
+    assert b["verdict"] == "conditional"
+    assert b["check"] == "L1DRAC-A2" and b["role"] == "not proved"
+    assert "holds (margin" not in b["text"]
+    assert "a rate on a box does not suffice" in b["text"]
+    assert "lipschitz_budget" in b["change"]
+
+
+def test_the_coordinates_of_the_certificate_are_named():
+    b = _binding(_cert([PROVED], coordinates=object()))
+    assert b["role"] == "tightest" and b["coordinates"] == "z = Theta x"
+    assert " in z = Theta x: " in b["text"]
+    assert _binding(_cert([PROVED]))["coordinates"] == "x"
