@@ -689,7 +689,7 @@ class TasilSettings:
     tube_radius: float = math.inf  #: R of assumption A2 (global MLP bounds: inf)
     policy: str | None = None  #: path of a trained policy (.npz); relative to the spec
     architecture: str = "mlp"  #: "mlp" | "residual" (structure + K x + Lipschitz-bounded MLP)
-    lipschitz_budget: float = math.inf  #: product of the residual MLP's layer norms (residual)
+    lipschitz_budget: float = math.inf  #: product of the policy MLP's layer spectral norms
     max_heldout_gap: float = math.inf  #: train fails (exit 1) when the held-out mean gap exceeds
     given: frozenset[str] = field(default=frozenset(), compare=False, repr=False)
 
@@ -712,7 +712,7 @@ class TasilSettings:
             "tube_radius": "radius R of assumption A2",
             "policy": "path of a trained policy (.npz), relative to the spec",
             "architecture": "policy class: 'mlp', or 'residual' = [policy] structure + K x + MLP",
-            "lipschitz_budget": "bound on the residual MLP's product of layer spectral norms",
+            "lipschitz_budget": "bound on the policy MLP's product of layer spectral norms",
             "max_heldout_gap": "training fails when the held-out mean gap exceeds this",
         }
     )
