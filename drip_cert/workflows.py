@@ -516,7 +516,8 @@ def _what_to_change(cert: Certificate, cid: str, role: str, inner: dict[str, Any
     if inner is not None and t is not None:
         i = inner["id"]
         if i.endswith(".level"):
-            from drip_cert.numerics.stats import min_trials_zero_failures  # scipy: CLI start-up
+            # scipy.stats: keep off the CLI start-up path (only a failing held-out form needs it)
+            from drip_cert.numerics.stats import min_trials_zero_failures  # scipy.stats: see above
 
             need = min_trials_zero_failures(t.delta / 2, t.delta / 2)
             return (

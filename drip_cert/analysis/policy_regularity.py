@@ -397,14 +397,18 @@ def _block_hessian_in_x(mlp, M: np.ndarray, c: np.ndarray, LO: np.ndarray, HI: n
     the interval ``M`` entry by entry. Returns ``(lo, hi)`` of shape ``(N, out, n, n)``."""
     N, n = LO.shape
     if M.shape == (n, n) and np.array_equal(M, np.eye(n)) and not np.any(c):
-        return enclose_derivatives(mlp, LO, HI, hessian=True).hessian
+        ident = enclose_derivatives(mlp, LO, HI, hessian=True).hessian
+        assert ident is not None  # a smooth network (checked by _split_blocks)
+        return ident
     Mlo, Mhi = _converted(M)
     clo, chi = _converted(c)
     ylo, yhi = affine_enclosure(M, c, LO, HI)
     big = np.maximum(np.abs(LO), np.abs(HI))
     slack = add_up_np(up_np(big @ (Mhi - Mlo).T), up_np(chi - clo))
     ylo, yhi = sub_down_np(ylo, slack), add_up_np(yhi, slack)
-    hlo, hhi = enclose_derivatives(mlp, ylo, yhi, hessian=True).hessian  # (N, out, k, k)
+    hess = enclose_derivatives(mlp, ylo, yhi, hessian=True).hessian
+    assert hess is not None  # a smooth network (checked by _split_blocks)
+    hlo, hhi = hess  # (N, out, k, k)
     k = M.shape[0]
     out = hlo.shape[1]
     tlo, thi = np.zeros((N, out, n, n)), np.zeros((N, out, n, n))

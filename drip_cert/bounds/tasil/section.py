@@ -157,7 +157,7 @@ def tasil_section(
     # the difference itself: terms both policies share cancel; a sound bound on it is preferred
     # to any triangle bound that rests on an estimate, and to a larger sound one
     L_dir = difference_jacobian_lipschitz(s, box)
-    direct = L_dir is not None and (L_tri.how == How.ESTIMATE or L_dir.value <= L_tri.value)
+    direct = L_dir is not None and (L_tri.how == How.ESTIMATE or L_dir.value < L_tri.value)
     L_Delta = (
         Quantity.derive(
             "L_Delta",
