@@ -486,6 +486,7 @@ def _binding(cert: Certificate) -> dict[str, Any]:
         "holds": c.holds,
         "margin": _json_safe(margin),
         "coordinates": coords,
+        "parts": {k: v["verdict"] for k, v in cert.part_verdicts().items()},
         "trainable": c.id in _TRAINABLE,
         "text": text + (f"; change: {change}" if change else ""),
         "change": change,

@@ -20,6 +20,7 @@ def _cert(checks, coordinates=None):
         certified=verdict.value == "certified",
         rho_tasil=None,
         rho_l1=None,
+        part_verdicts=lambda: {"contraction": {"verdict": verdict.value}},
     )
 
 
@@ -35,6 +36,7 @@ def test_a_failing_check_binds_before_one_that_holds_on_a_box():
     assert b["verdict"] == "not_certified"
     assert b["check"] == "L1DRAC-design" and b["role"] == "fails" and not b["holds"]
     assert b["margin"] == -1.0
+    assert b["parts"] == {"contraction": "not_certified"}
 
 
 def test_a_conditional_verdict_names_the_unproved_check_without_calling_it_binding_margin():
