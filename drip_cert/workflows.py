@@ -478,6 +478,19 @@ def _binding(cert: Certificate) -> dict[str, Any]:
         + (inner["text"] if inner is not None else why)
     )
     change = _what_to_change(cert, c.id, role, inner)
+    # the TaSIL part's own binding inequality, also when another part's check comes first
+    t_fail = next((t for t in cert.assumptions if t.id == "TaSIL" and not t.holds), None)
+    t_inner = _tasil_binding(cert) if t_fail is not None else None
+    tasil_binding = (
+        None
+        if t_inner is None
+        else {
+            "check": t_inner["check"],
+            "margin": _json_safe(t_inner["margin"]),
+            "text": t_inner["text"],
+            "change": _what_to_change(cert, "TaSIL", "fails", t_inner),
+        }
+    )
     return {
         "verdict": cert.verdict.value,
         "certified": cert.certified,
@@ -490,6 +503,7 @@ def _binding(cert: Certificate) -> dict[str, Any]:
         "trainable": c.id in _TRAINABLE,
         "text": text + (f"; change: {change}" if change else ""),
         "change": change,
+        "tasil_binding": tasil_binding,
         "rho_tasil": _json_safe(cert.rho_tasil),
         "rho_l1": _json_safe(cert.rho_l1),
     }

@@ -100,3 +100,29 @@ def test_the_lipschitz_budget_holds_for_a_plain_mlp(tmp_path):
     tp = train_on_system(spec.system, spec.settings.tasil)
     prod = float(np.prod([np.linalg.norm(w, 2) for w in tp.mlp.weights]))
     assert prod <= BUDGET * (1 + BUDGET_REL)
+
+
+def test_the_tasil_inequality_is_reported_when_another_part_fails_first():
+    """Both parts fail: the binding check is the first, and the TaSIL part's own failing
+    inequality comes with its margin and what to change (a smaller Jacobian error)."""
+    b_fails = Check("tasil.sharp.b", False, "b = gamma0 h1 < 1: 4.66 <= 1", 4.66, 1.0, -3.66)
+    tasil = SimpleNamespace(
+        forms=(SimpleNamespace(name="held_out", checks=(b_fails,)),),
+        gap_checks=(),
+        rho_form="held_out",
+        gamma0=1.57,
+        h0=3.6,
+        h1=2.97,
+        L_Delta=0.5,
+        delta=0.1,
+        tau0=1.0,
+        tau1=1.0,
+        n_val=100,
+    )
+    tcheck = Check("TaSIL", False, "rho_TaSIL = inf", how=How.SOUND)
+    cert = _cert([PROVED, FAILS, tcheck])
+    b = _binding(SimpleNamespace(**{**vars(cert), "tasil": tasil}))
+    assert b["check"] == "L1DRAC-design"
+    tb = b["tasil_binding"]
+    assert tb["check"] == "tasil.sharp.b" and tb["margin"] == -3.66
+    assert "smaller Jacobian error" in tb["change"] and "h1 <= 0.6369" in tb["change"]
