@@ -520,7 +520,13 @@ def _tasil_binding(cert: Certificate) -> dict[str, Any] | None:
     c = next((c for c in checks if not c.holds), None)
     if c is None:
         return None
-    return {"check": c.id, "margin": c.margin, "text": f"{c.id}: {c.detail}", "id": c.id}
+    return {
+        "check": c.id,
+        "margin": c.margin,
+        "text": f"{c.id}: {c.detail}",
+        "id": c.id,
+        "lhs": c.lhs,
+    }
 
 
 def _what_to_change(cert: Certificate, cid: str, role: str, inner: dict[str, Any] | None) -> str:
@@ -543,8 +549,9 @@ def _what_to_change(cert: Certificate, cid: str, role: str, inner: dict[str, Any
             )
         if i.endswith((".b", ".h1")):
             return (
-                f"a smaller Jacobian error: gamma0 h1 = {t.gamma0 * t.h1:.4g} must be < 1 "
-                f"(h1 = {t.h1:.4g}, h1 <= {1 / t.gamma0:.4g} needed): longer training or "
+                f"a smaller Jacobian error: b = gamma0 h1 = {inner['lhs']:.4g} must be < 1 "
+                f"(training max h1 = {t.h1:.4g}; h1 <= {1 / t.gamma0:.4g} needed wherever it is "
+                "evaluated, the held-out form's threshold included): longer training or "
                 "more Jacobian matching ([tasil] order, steps), finer samples ([tasil] samples: "
                 f"the continuous-time sup adds about L_Delta |x'| dt, L_Delta = {t.L_Delta:.4g})"
             )
