@@ -475,11 +475,20 @@ def export_policy(
 
 
 def _binding(cert: Certificate) -> dict[str, Any]:
-    """The certificate's verdict and binding condition: the first failing check, else the check
-    with the smallest relative margin ``margin / max(|lhs|, |rhs|)``."""
-    checks = [c for c in cert.assumptions if c.status != "holds" or not c.scope_ok]
-    if checks:
-        c = checks[0]
+    """The certificate's verdict and binding condition, in the coordinates the certificate uses.
+
+    The binding condition is the first check that fails; else (a conditional verdict) the first
+    check that holds but is not proved where it is needed (an estimate, an unproved region); only
+    for a certified verdict the check with the smallest relative margin
+    ``margin / max(|lhs|, |rhs|)`` (``"tightest"``). A check that holds is never named as binding
+    for a verdict it does not decide. ``change`` says what would move it (:func:`_what_to_change`).
+    """
+    failing = [c for c in cert.assumptions if not c.holds]
+    unproved = [c for c in cert.assumptions if c.holds and not c.proved]
+    if failing:
+        c, role = failing[0], "fails"
+    elif unproved:
+        c, role = unproved[0], "not proved"
     else:
 
         def rel(c: Any) -> float:
@@ -489,18 +498,118 @@ def _binding(cert: Certificate) -> dict[str, Any]:
                 return math.inf
             return m / scale
 
-        c = min(cert.assumptions, key=rel)
+        c, role = min(cert.assumptions, key=rel), "tightest"
+    coords = "x" if cert.coordinates is None else "z = Theta x"
+    inner = _tasil_binding(cert) if c.id == "TaSIL" and role == "fails" else None
+    why = (
+        c.scope_reason
+        if role == "not proved" and not c.scope_ok
+        else f"rests on estimates ({c.how.value})"
+        if role == "not proved"
+        else c.detail
+    )
+    margin = inner["margin"] if inner is not None else c.margin
+    text = (
+        f"{c.id} {role}"
+        + (f" (margin {margin:.4g})" if role != "not proved" and math.isfinite(margin) else "")
+        + f" in {coords}: "
+        + (inner["text"] if inner is not None else why)
+    )
+    change = _what_to_change(cert, c.id, role, inner)
+    # the TaSIL part's own binding inequality, also when another part's check comes first
+    t_fail = next((t for t in cert.assumptions if t.id == "TaSIL" and not t.holds), None)
+    t_inner = _tasil_binding(cert) if t_fail is not None else None
+    tasil_binding = (
+        None
+        if t_inner is None
+        else {
+            "check": t_inner["check"],
+            "margin": _json_safe(t_inner["margin"]),
+            "text": t_inner["text"],
+            "change": _what_to_change(cert, "TaSIL", "fails", t_inner),
+        }
+    )
     return {
         "verdict": cert.verdict.value,
         "certified": cert.certified,
-        "check": c.id,
+        "check": c.id if inner is None else f"{c.id}: {inner['check']}",
+        "role": role,
         "holds": c.holds,
-        "margin": _json_safe(c.margin),
+        "margin": _json_safe(margin),
+        "coordinates": coords,
+        "parts": {k: v["verdict"] for k, v in cert.part_verdicts().items()},
         "trainable": c.id in _TRAINABLE,
-        "text": f"{c.id} {'holds' if c.holds else 'fails'} (margin {c.margin:.4g}): {c.detail}",
+        "text": text + (f"; change: {change}" if change else ""),
+        "change": change,
+        "tasil_binding": tasil_binding,
         "rho_tasil": _json_safe(cert.rho_tasil),
         "rho_l1": _json_safe(cert.rho_l1),
     }
+
+
+def _tasil_binding(cert: Certificate) -> dict[str, Any] | None:
+    """The failing inequality inside the TaSIL part: the first failing check of the form that
+    gives ``rho_TaSIL``, else of the deterministic gap checks (``None`` when none is recorded)."""
+    t = cert.tasil
+    if t is None:
+        return None
+    form = next((f for f in t.forms if f.name == t.rho_form), None)
+    checks = [*(form.checks if form is not None else ()), *t.gap_checks]
+    c = next((c for c in checks if not c.holds), None)
+    if c is None:
+        return None
+    return {
+        "check": c.id,
+        "margin": c.margin,
+        "text": f"{c.id}: {c.detail}",
+        "id": c.id,
+        "lhs": c.lhs,
+    }
+
+
+def _what_to_change(cert: Certificate, cid: str, role: str, inner: dict[str, Any] | None) -> str:
+    """What would move the binding check (empty when nothing training can do is known)."""
+    if role == "tightest":
+        return ""
+    t = cert.tasil
+    if inner is not None and t is not None:
+        i = inner["id"]
+        if i.endswith(".level"):
+            # scipy.stats: keep off the CLI start-up path (only a failing held-out form needs it)
+            from drip_cert.numerics.stats import min_trials_zero_failures  # scipy.stats: see above
+
+            need = min_trials_zero_failures(t.delta / 2, t.delta / 2)
+            return (
+                f"more demonstrations: n_val >= {need} held-out trajectories with none exceeding "
+                f"tau = ({t.tau0:.4g}, {t.tau1:.4g}) ([tasil] heldout; now {t.n_val}), or a policy "
+                "whose h0, h1 stay below tau on fresh states (more training data: [tasil] "
+                "trajectories)"
+            )
+        if i.endswith((".b", ".h1")):
+            return (
+                f"a smaller Jacobian error: b = gamma0 h1 = {inner['lhs']:.4g} must be < 1 "
+                f"(training max h1 = {t.h1:.4g}; h1 <= {1 / t.gamma0:.4g} needed wherever it is "
+                "evaluated, the held-out form's threshold included): longer training or "
+                "more Jacobian matching ([tasil] order, steps), finer samples ([tasil] samples: "
+                f"the continuous-time sup adds about L_Delta |x'| dt, L_Delta = {t.L_Delta:.4g})"
+            )
+        if i.endswith((".disc", ".L")):
+            return (
+                f"a smaller L_Delta = {t.L_Delta:.4g} (a smaller [tasil] lipschitz_budget) or "
+                f"a smaller h0 = {t.h0:.4g} (longer training)"
+            )
+        if i.endswith((".R", ".eta")):
+            return "a larger tube radius ([tasil] tube_radius) or a smaller h0"
+    if cid in ("L1DRAC-A2", "L1DRAC-A7"):
+        return (
+            "a learned loop proved to contract for all x: a smaller [tasil] lipschitz_budget, "
+            "or the residual architecture whose loop is proved globally"
+            if role == "not proved"
+            else "a learned loop that contracts: a smaller [tasil] lipschitz_budget"
+        )
+    if role == "not proved" and cid == "TaSIL":
+        return "sound inputs: see the TaSIL part's provenance for the estimate it rests on"
+    return ""
 
 
 def _json_safe(v: float | None) -> float | None:

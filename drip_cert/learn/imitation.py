@@ -158,6 +158,9 @@ def train_on_system(
     MLP ``N`` whose product of layer spectral norms stays within ``settings.lipschitz_budget``.
     The loss is the same TaSIL/BC loss, on the residual targets ``pi*(x) - structure(x)`` and
     their derivatives (the structure is fixed, so matching the residual is matching ``pi*``).
+    ``settings.lipschitz_budget`` bounds the product of layer spectral norms of the network of
+    either architecture (projected after every step), which bounds its Lipschitz constant and,
+    with the activation's curvature, the certificate's ``L_dpi``.
     """
     from drip_cert.learn.tasil import train_policy  # optax: keep off the API's import path
 
@@ -191,7 +194,7 @@ def train_on_system(
         batch=settings.batch,
         progress=progress,
         skip=residual,
-        lipschitz_budget=settings.lipschitz_budget if residual else float("inf"),
+        lipschitz_budget=settings.lipschitz_budget,
     )
     system = learned_system(
         s, res.mlp, linear=res.linear, structure=structure if residual else None

@@ -865,7 +865,7 @@ class TasilSettings:
         ("mlp", "residual"),
     )
     lipschitz_budget: float = setting(
-        math.inf, "bound on the residual MLP's product of layer spectral norms", positive_or_inf
+        math.inf, "bound on the policy MLP's product of layer spectral norms", positive_or_inf
     )
     max_heldout_gap: float = setting(
         math.inf, "training fails when the held-out mean gap exceeds this", positive_or_inf
