@@ -22,11 +22,11 @@ from pathlib import Path
 
 import numpy as np
 
-from drip_cert.analysis.block_enclosure import block_enclose_callback
-from drip_cert.analysis.contraction import SamplingOptions, contraction_rate
-from drip_cert.analysis.mlp import enclose_jacobian
-from drip_cert.analysis.mlp.derivatives import enclose_jacobian_centred
-from drip_cert.analysis.mlp_loop import sup_difference_jacobian_norm, system_mlps
+from drip_cert.analysis.contraction.mlp_loop import sup_difference_jacobian_norm, system_mlps
+from drip_cert.analysis.contraction.rate import SamplingOptions, contraction_rate
+from drip_cert.analysis.networks.block_enclosure import block_enclose_callback
+from drip_cert.analysis.networks.mlp import enclose_jacobian
+from drip_cert.analysis.networks.mlp.derivatives import enclose_jacobian_centred
 from drip_cert.learn.imitation import learned_system
 from drip_cert.model.mlp import load_mlp
 from drip_cert.spec.load import load_spec

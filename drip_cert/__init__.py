@@ -35,14 +35,14 @@ _EXPORTS: dict[str, str] = {
     "load_mlp": "drip_cert.model.mlp",
     "Fingerprint": "drip_cert.model.fingerprint",
     # analysis
-    "input_constants": "drip_cert.analysis.constants",
-    "uncertainty_constants": "drip_cert.analysis.constants",
-    "contraction_rate": "drip_cert.analysis.contraction",
-    "contraction_metric": "drip_cert.analysis.lmi",
+    "input_constants": "drip_cert.analysis.growth.constants",
+    "uncertainty_constants": "drip_cert.analysis.growth.constants",
+    "contraction_rate": "drip_cert.analysis.contraction.rate",
+    "contraction_metric": "drip_cert.analysis.contraction.lmi",
     "delta_iss": "drip_cert.analysis.iss",
-    "mu_1": "drip_cert.analysis.lognorm",
-    "mu_2": "drip_cert.analysis.lognorm",
-    "mu_inf": "drip_cert.analysis.lognorm",
+    "mu_1": "drip_cert.analysis.contraction.lognorm",
+    "mu_2": "drip_cert.analysis.contraction.lognorm",
+    "mu_inf": "drip_cert.analysis.contraction.lognorm",
     # bounds
     "certify": "drip_cert.bounds.certificate",
     "Certificate": "drip_cert.bounds.certificate",
@@ -72,14 +72,14 @@ _EXPORTS: dict[str, str] = {
 }
 
 if TYPE_CHECKING:  # the names with their types, for mypy and IDEs (imported lazily at run time)
-    from drip_cert.analysis.constants import input_constants as input_constants
-    from drip_cert.analysis.constants import uncertainty_constants as uncertainty_constants
-    from drip_cert.analysis.contraction import contraction_rate as contraction_rate
+    from drip_cert.analysis.contraction.lmi import contraction_metric as contraction_metric
+    from drip_cert.analysis.contraction.lognorm import mu_1 as mu_1
+    from drip_cert.analysis.contraction.lognorm import mu_2 as mu_2
+    from drip_cert.analysis.contraction.lognorm import mu_inf as mu_inf
+    from drip_cert.analysis.contraction.rate import contraction_rate as contraction_rate
+    from drip_cert.analysis.growth.constants import input_constants as input_constants
+    from drip_cert.analysis.growth.constants import uncertainty_constants as uncertainty_constants
     from drip_cert.analysis.iss import delta_iss as delta_iss
-    from drip_cert.analysis.lmi import contraction_metric as contraction_metric
-    from drip_cert.analysis.lognorm import mu_1 as mu_1
-    from drip_cert.analysis.lognorm import mu_2 as mu_2
-    from drip_cert.analysis.lognorm import mu_inf as mu_inf
     from drip_cert.bounds.certificate import Certificate as Certificate
     from drip_cert.bounds.certificate import certify as certify
     from drip_cert.bounds.l1drac.constants import L1Constants as L1Constants

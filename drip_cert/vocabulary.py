@@ -4,7 +4,7 @@ and the routes of the contraction rate.
 The Monte-Carlo engine (:mod:`drip_cert.sim.config`) simulates these processes, and
 ``validate --data`` (:mod:`drip_cert.validate.data`) reads recorded ones by the same names; both
 import them from here, so the command line can name them without loading jax. The contraction
-routes are implemented in :data:`drip_cert.analysis.contraction.ROUTES` and offered by the
+routes are implemented in :data:`drip_cert.analysis.contraction.rate.ROUTES` and offered by the
 settings (``[contraction] method``) under these names.
 """
 

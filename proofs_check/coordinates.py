@@ -1,6 +1,6 @@
 """Certificates in metric coordinates: the mapping of bounds between ``z = Theta x`` and ``x``
 (docs/math/contraction.md section 5; ``drip_cert.model.system.System.transformed``,
-``drip_cert.analysis.coordinates``).
+``drip_cert.analysis.contraction.coordinates``).
 
 * ``coordinates.delta_iss_maps_back`` (Proposition 5.3 with section 6.2): for a linear closed loop
   ``x' = A x + B w`` with ``||w|| <= 1``, contracting in the metric ``P`` at rate ``lambda``, the
@@ -48,8 +48,8 @@ def _random_loop(rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
 @register("coordinates.delta_iss_maps_back", LABEL)
 def check_delta_iss_maps_back(ctx: Context, factor: float = 1.0) -> CheckResult:
     """Simulated gaps in x never exceed the z-bound mapped back by drip-cert's factor."""
-    from drip_cert.analysis.coordinates import coordinates_from_metric
-    from drip_cert.analysis.lognorm import mu2_constant_bounds
+    from drip_cert.analysis.contraction.coordinates import coordinates_from_metric
+    from drip_cert.analysis.contraction.lognorm import mu2_constant_bounds
 
     name = "coordinates.delta_iss_maps_back"
     rng = ctx.rng

@@ -1,5 +1,5 @@
 """The forward-invariant sets drip-cert proves inside a box where a contraction rate holds
-(docs/math/contraction.md section 7; ``drip_cert.analysis.invariance``).
+(docs/math/contraction.md section 7; ``drip_cert.analysis.contraction.invariance``).
 
 Proposition (ball): ``mu_2(D F) <= -lambda`` on a convex box ``B``, ``||F(x_0)|| <= eps`` and
 ``r >= max(eps / lambda, max_{y in D} ||y - x_0||)`` with the ball ``S = {||x - x_0|| <= r}``
@@ -47,7 +47,7 @@ def _system(rng: np.random.Generator):
 def check_invariant_sets(ctx: Context, radius_factor: float = 1.0) -> CheckResult:
     """Trajectories from the support never leave the set drip-cert proves invariant."""
     from drip_cert import contraction_rate
-    from drip_cert.analysis.invariance import invariant_ball, invariant_box
+    from drip_cert.analysis.contraction.invariance import invariant_ball, invariant_box
 
     name = "invariance.sets_random_systems"
     rng = ctx.rng

@@ -1,5 +1,5 @@
 """The moment bound of a contracting SDE (docs/math/contraction.md Proposition 6.5; L1-DRAC
-Assumption 3 with a known diffusion; ``drip_cert.analysis.closed_loop.sde_moment_bound``).
+Assumption 3 with a known diffusion; ``drip_cert.analysis.growth.closed_loop.sde_moment_bound``).
 
 The proposition: if ``(x - y)^T (F(t, x) - F(t, y)) <= -lambda ||x - y||^2``, ``||F(t, 0)|| <= b``,
 ``||p(t, x)||_F^2 <= a0 + a1 ||x|| + a2 ||x||^2`` and ``||X_0|| <= r0``, then with
@@ -66,7 +66,7 @@ def check_ou(ctx: Context, factor: float = 1.0, ignore_diffusion: bool = False) 
     ``factor`` multiplies the bound and ``ignore_diffusion`` sets ``a0 = 0`` (the deterministic
     bound): the tests use them to show the check fails on a wrong formula.
     """
-    from drip_cert.analysis.closed_loop import sde_moment_bound
+    from drip_cert.analysis.growth.closed_loop import sde_moment_bound
 
     name = "sde.ou_closed_form"
     rng = ctx.rng

@@ -1,4 +1,5 @@
-"""The slope-restricted LMI of docs/math/contraction.md section 11 (analysis/slope_lmi.py).
+"""The slope-restricted LMI of docs/math/contraction.md section 11
+(analysis/contraction/slope_lmi.py).
 
 Proposition 11.2: a verified ``(P, t, lambda)`` of (11.3) gives
 ``(x - y)^T P (F(x) - F(y)) <= -lambda ||x - y||_P^2`` for every pair. Checked by falsification:
@@ -30,7 +31,7 @@ EIG_TOL = 1e-10
 
 
 def _loop(rng: np.random.Generator, act: str, one: bool):
-    from drip_cert.analysis.closed_loop import AffineBlocks
+    from drip_cert.analysis.growth.closed_loop import AffineBlocks
     from drip_cert.model.mlp import MLP
 
     if one:
@@ -56,7 +57,7 @@ def _loop(rng: np.random.Generator, act: str, one: bool):
 @register("slope_lmi.incremental_contraction", LABEL)
 def check_incremental_contraction(ctx: Context, slope_scale: float = 1.0) -> CheckResult:
     """No pair of states violates the rate of a verified slope-restricted LMI."""
-    from drip_cert.analysis.slope_lmi import slope_lmi_rate, slope_structure
+    from drip_cert.analysis.contraction.slope_lmi import slope_lmi_rate, slope_structure
 
     name = "slope_lmi.incremental_contraction"
     rng = ctx.rng

@@ -1,5 +1,5 @@
 """The TaSIL sure bound on a finite horizon along the expert's tube (docs/math/tasil.md sections
-3.7, 3.9, 3.10; ``drip_cert.bounds.tasil.tube``, ``drip_cert.analysis.learned_loop``).
+3.7, 3.9, 3.10; ``drip_cert.bounds.tasil.tube``, ``drip_cert.analysis.contraction.learned_loop``).
 
 Five claims, each falsified on random instances and attained on tight ones (one in three), so that
 a bound 1 % smaller (``factor = 0.99``) fails:
@@ -29,7 +29,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.integrate import solve_ivp
 
-from drip_cert.analysis.mlp import enclose_jacobian_centred
+from drip_cert.analysis.networks.mlp import enclose_jacobian_centred
 from drip_cert.bounds.tasil.tube import (
     horizon_factor_up,
     time_resolved_gap_up,

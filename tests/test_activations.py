@@ -257,7 +257,7 @@ def test_centred_jacobian_enclosure_contains_sampled_jacobians(activation):
     smooth network the mean-value form, for a relu one the plain Clarke enclosure (no Hessian
     through a kink; this asserted a Hessian before). Every autodiff Jacobian at points of the box
     (almost everywhere differentiable) lies inside."""
-    from drip_cert.analysis.mlp import enclose_jacobian_centred
+    from drip_cert.analysis.networks.mlp import enclose_jacobian_centred
 
     rng = np.random.default_rng(3)
     m = init_mlp((2, 8, 8, 1), rng, activation=activation)

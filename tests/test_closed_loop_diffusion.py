@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 import sympy as sp
 
-from drip_cert.analysis.closed_loop import closed_loop_constants, sde_moment_bound
+from drip_cert.analysis.growth.closed_loop import closed_loop_constants, sde_moment_bound
 from drip_cert.model.system import System
 from drip_cert.provenance import How, Quantity
 

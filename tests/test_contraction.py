@@ -8,20 +8,20 @@ import numpy as np
 import pytest
 import sympy as sp
 
-from drip_cert.analysis.contraction import (
-    DEFAULT_TOL,
-    SamplingOptions,
-    contraction_rate,
-    jacobian_function,
-)
-from drip_cert.analysis.lmi import (
+from drip_cert.analysis.contraction.lmi import (
     DEFAULT_BISECTION_TOL,
     contraction_metric,
     interval_vertices,
     metric_rate_lmi,
     verify_metric,
 )
-from drip_cert.analysis.lognorm import mu_2, mu_2_weighted, spectral_abscissa
+from drip_cert.analysis.contraction.lognorm import mu_2, mu_2_weighted, spectral_abscissa
+from drip_cert.analysis.contraction.rate import (
+    DEFAULT_TOL,
+    SamplingOptions,
+    contraction_rate,
+    jacobian_function,
+)
 from drip_cert.errors import SpecError
 from drip_cert.numerics.interval import UnsupportedExpression
 from drip_cert.provenance import How

@@ -1,5 +1,6 @@
 """The routes of the contraction rate: named once (:mod:`drip_cert.vocabulary`), implemented
-once (:data:`drip_cert.analysis.contraction.ROUTES`), offered by the settings under those names.
+once (:data:`drip_cert.analysis.contraction.rate.ROUTES`), offered by the settings under those
+names.
 
 The mathematics: ``J = diag(-1 - x1^2, -2)`` on ``x1 in [-1, 1]`` has
 ``mu_2(J) = max(-1 - x1^2, -2) = -1 - x1^2``, largest (``-1``) at ``x1 = 0``: the rate is 1.
@@ -13,7 +14,7 @@ import numpy as np
 import pytest
 import sympy as sp
 
-from drip_cert.analysis.contraction import ROUTES, SamplingOptions, contraction_rate
+from drip_cert.analysis.contraction.rate import ROUTES, SamplingOptions, contraction_rate
 from drip_cert.errors import SpecError
 from drip_cert.provenance import How
 from drip_cert.spec.settings import ContractionSettings

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 import sympy as sp
 
-from drip_cert.analysis.lognorm import mu2_constant_bounds
+from drip_cert.analysis.contraction.lognorm import mu2_constant_bounds
 from drip_cert.errors import SpecError
 from drip_cert.model.blocks import mlp_block
 from drip_cert.model.mlp import init_mlp

@@ -17,9 +17,9 @@ import pytest
 import sympy as sp
 
 from drip_cert._jax import jax, jnp
-from drip_cert.analysis import policy_regularity
-from drip_cert.analysis.mlp import jacobian_lipschitz_bound
-from drip_cert.analysis.policy_regularity import (
+from drip_cert.analysis.networks import policy_regularity
+from drip_cert.analysis.networks.mlp import jacobian_lipschitz_bound
+from drip_cert.analysis.networks.policy_regularity import (
     difference_jacobian_lipschitz,
     jacobian_lipschitz,
     local_jacobian_lipschitz,

@@ -16,7 +16,7 @@ import pytest
 
 pytest.importorskip("onnx")  # a declared dependency; the skip only names a broken venv
 
-from drip_cert.analysis.policy_regularity import jacobian_lipschitz  # noqa: E402
+from drip_cert.analysis.networks.policy_regularity import jacobian_lipschitz  # noqa: E402
 from drip_cert.cli import main  # noqa: E402
 from drip_cert.spec.load import load_spec  # noqa: E402
 

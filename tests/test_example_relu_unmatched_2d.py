@@ -17,7 +17,7 @@ import pytest
 
 pytest.importorskip("onnx")  # a declared dependency; the skip only names a broken venv
 
-from drip_cert.analysis.mlp import lipschitz_bound  # noqa: E402
+from drip_cert.analysis.networks.mlp import lipschitz_bound  # noqa: E402
 from drip_cert.cli import main  # noqa: E402
 from drip_cert.spec.load import load_spec  # noqa: E402
 

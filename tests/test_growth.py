@@ -16,7 +16,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.optimize import minimize_scalar
 
-from drip_cert.analysis.growth import (
+from drip_cert.analysis.growth.regularity import (
     BNB_RTOL,
     growth_bound,
     holder_half_bound,

@@ -11,7 +11,7 @@ import pytest
 import sympy as sp
 from flint import arb, ctx
 
-from drip_cert.analysis.expr_sup import BATCHED_SPLITS_FACTOR, BNB_RTOL, expr_sup
+from drip_cert.analysis.growth.expr_sup import BATCHED_SPLITS_FACTOR, BNB_RTOL, expr_sup
 from drip_cert.numerics.bnb import maximize
 from drip_cert.numerics.interval import MatrixEnclosure, UnsupportedExpression
 from drip_cert.numerics.interval_batch import BatchEnclosure, compile_batch

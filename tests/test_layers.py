@@ -228,9 +228,9 @@ def test_the_parser_sees_every_form_of_import(tmp_path, source, expected):
 
 def test_the_checker_fails_on_an_upward_import_a_sideways_import_and_a_cycle():
     """Made-up graphs: the checks above would fail on each of these."""
-    up = {"drip_cert.model.system": {"drip_cert.analysis.constants"}}
+    up = {"drip_cert.model.system": {"drip_cert.analysis.growth.constants"}}
     assert _violations(up) == [
-        "drip_cert.model.system (layer 3) imports drip_cert.analysis.constants (layer 5)"
+        "drip_cert.model.system (layer 3) imports drip_cert.analysis.growth.constants (layer 5)"
     ]
     side = {
         "drip_cert.analysis.x": {"drip_cert.learn.y"},
@@ -417,7 +417,8 @@ def test_every_function_local_import_keeps_a_heavy_package_off_an_import_path():
         ),
         ("def f():\n    import matplotlib.pyplot as plt  # matplotlib: only for figures\n", ""),
         (
-            "def f():\n    from drip_cert.analysis.lmi import (  # cvxpy: one function needs it\n"
+            "def f():\n"
+            "    from drip_cert.analysis.contraction.lmi import (  # cvxpy: one function needs it\n"
             "        contraction_metric,\n    )\n",
             "",
         ),

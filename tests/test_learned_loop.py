@@ -8,13 +8,13 @@ import json
 import numpy as np
 import pytest
 
-from drip_cert.analysis.learned_loop import (
+from drip_cert.analysis.contraction.learned_loop import (
     best_global_rate,
     lipschitz_rate,
     perturbation_rate,
     sup_policy_difference,
 )
-from drip_cert.analysis.lognorm import mu_2
+from drip_cert.analysis.contraction.lognorm import mu_2
 from drip_cert.bounds.tasil import tasil_certificate
 from drip_cert.learn.imitation import learned_system
 from drip_cert.model.mlp import MLP, load_mlp
@@ -244,7 +244,7 @@ support = [[-1.0, 1.0], [-1.0, 1.0], [-1.0, 1.0], [-1.0, 1.0]]
 
 
 def test_sup_policy_difference_is_tight_within_a_small_budget(tmp_path, monkeypatch):
-    import drip_cert.analysis.learned_loop as ll
+    import drip_cert.analysis.contraction.learned_loop as ll
 
     monkeypatch.setattr(ll, "SUP_DIFF_MAX_BOXES", TIGHT_BOXES)
     rng = np.random.default_rng(4)
@@ -273,7 +273,7 @@ def test_an_affine_difference_is_bounded_at_the_vertices_without_a_search(tmp_pa
     import itertools as it
 
     from drip_cert import load_spec
-    from drip_cert.analysis.learned_loop import sup_policy_difference
+    from drip_cert.analysis.contraction.learned_loop import sup_policy_difference
     from tests.helpers import write_spec
 
     spec = write_spec(

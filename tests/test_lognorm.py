@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 import scipy.linalg as sl
 
-from drip_cert.analysis.lognorm import (
+from drip_cert.analysis.contraction.lognorm import (
     lambda_max_upper,
     mu2_constant_bounds,
     mu2_interval_upper,
@@ -222,7 +222,7 @@ def test_constant_bounds_of_sympy_matrices():
 
 
 def test_constant_bounds_fallback_above_the_exact_size(monkeypatch):
-    import drip_cert.analysis.lognorm as ln
+    import drip_cert.analysis.contraction.lognorm as ln
 
     monkeypatch.setattr(ln, "EXACT_MAX_DIM", 2)
     A = np.random.default_rng(22).normal(size=(6, 6))

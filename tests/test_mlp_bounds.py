@@ -1,4 +1,4 @@
-"""Tests of drip_cert.analysis.mlp: activation constants, Lipschitz and Jacobian-Lipschitz
+"""Tests of drip_cert.analysis.networks.mlp: activation constants, Lipschitz and Jacobian-Lipschitz
 bounds of MLPs (DRIP Assumption PolicyRegularity), LipSDP, interval enclosures."""
 
 from __future__ import annotations
@@ -12,7 +12,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from drip_cert._jax import jax, jnp
-from drip_cert.analysis.mlp import (
+from drip_cert.analysis.networks.mlp import (
     activation_bounds,
     enclose_activation,
     enclose_activation_prime,
@@ -372,7 +372,7 @@ def test_activation_constants_are_arb_bounds_of_the_closed_forms():
 def test_output_bound_and_products_are_rounded_up():
     from fractions import Fraction
 
-    from drip_cert.analysis.closed_loop import mlp_output_bound
+    from drip_cert.analysis.growth.closed_loop import mlp_output_bound
 
     # || |W| 1 + |b| || for a tanh net: 1/3 and 1/10 are not floats, the bound must cover the
     # exact norm of the float entries

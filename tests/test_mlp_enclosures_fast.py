@@ -1,5 +1,6 @@
 """Fast vectorised enclosures of MLP values, Jacobians and Hessians over many boxes
-(drip_cert.analysis.mlp.derivatives): containment of the exact (Arb) point values, tightness
+(drip_cert.analysis.networks.mlp.derivatives): containment of the exact (Arb) point values,
+tightness
 against the plain interval route, and detection of a dropped rounding or a wrong sign."""
 
 from __future__ import annotations
@@ -9,8 +10,8 @@ import pytest
 from flint import arb, ctx
 
 import drip_cert.model.activations as acts
-from drip_cert.analysis.mlp import enclose_jacobian, enclose_output
-from drip_cert.analysis.mlp.derivatives import (
+from drip_cert.analysis.networks.mlp import enclose_jacobian, enclose_output
+from drip_cert.analysis.networks.mlp.derivatives import (
     enclose_activation_second,
     enclose_derivatives,
     enclose_jacobian_centred,

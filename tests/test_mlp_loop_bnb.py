@@ -1,4 +1,5 @@
-"""Vectorised branch and bound on matrices affine in MLP Jacobians (drip_cert.analysis.mlp_loop):
+"""Vectorised branch and bound on matrices affine in MLP Jacobians
+(drip_cert.analysis.contraction.mlp_loop):
 the decomposition, soundness of the per-box vertex bounds against sampled values, closed-form
 cases, the batched branch and bound, and the 'mlp-bnb' contraction route."""
 
@@ -11,15 +12,15 @@ import pytest
 import sympy as sp
 
 from drip_cert._jax import jax, jnp
-from drip_cert.analysis.block_enclosure import block_enclose_callback
-from drip_cert.analysis.contraction import contraction_rate
-from drip_cert.analysis.lognorm import mu_2
-from drip_cert.analysis.mlp_loop import (
+from drip_cert.analysis.contraction.lognorm import mu_2
+from drip_cert.analysis.contraction.mlp_loop import (
     box_bounds,
     decompose_jacobian,
     local_jacobian_lipschitz,
     matrix_bnb,
 )
+from drip_cert.analysis.contraction.rate import contraction_rate
+from drip_cert.analysis.networks.block_enclosure import block_enclose_callback
 from drip_cert.errors import SpecError
 from drip_cert.model.blocks import mlp_block
 from drip_cert.model.mlp import MLP, init_mlp

@@ -16,7 +16,7 @@ import pytest
 import sympy as sp
 
 from drip_cert import certify, load_spec
-from drip_cert.analysis.contraction import contraction_rate
+from drip_cert.analysis.contraction.rate import contraction_rate
 from drip_cert.numerics.stats import clopper_pearson_upper, min_trials_zero_failures
 from drip_cert.provenance import split_timings
 from drip_cert.report import certificate_markdown

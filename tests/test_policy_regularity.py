@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from drip_cert.analysis.policy_regularity import jacobian_lipschitz
+from drip_cert.analysis.networks.policy_regularity import jacobian_lipschitz
 from drip_cert.model.mlp import init_mlp
 from drip_cert.provenance import How
 from drip_cert.spec.load import load_spec
@@ -97,7 +97,7 @@ def test_the_difference_cancels_shared_terms(tmp_path):
     """pi* and pi_IL share 0.5 sin(x2)^3 (a compensation both carry): d(pi_IL - pi*) is constant,
     so its Lipschitz constant is exactly 0, while the triangle bound adds the two policies' own
     (equal, positive) constants."""
-    from drip_cert.analysis.policy_regularity import difference_jacobian_lipschitz
+    from drip_cert.analysis.networks.policy_regularity import difference_jacobian_lipschitz
 
     s, _ = _system(
         tmp_path,
@@ -113,7 +113,7 @@ def test_the_difference_cancels_shared_terms(tmp_path):
 def test_the_difference_bound_is_sound_where_terms_do_not_cancel(tmp_path):
     """Delta = 0.1 sin(x2)^2 (not shared): the interval bound on the box is >= the true sup of
     |d^2 Delta / dx2^2| = 0.2 |cos(2 x2)| (= 0.2 at x2 = 0), within interval overestimation."""
-    from drip_cert.analysis.policy_regularity import difference_jacobian_lipschitz
+    from drip_cert.analysis.networks.policy_regularity import difference_jacobian_lipschitz
 
     s, _ = _system(tmp_path, "-x1 - 2*x2", 'learned = ["-x1 - 2*x2 + 0.1*sin(x2)**2"]')
     d = difference_jacobian_lipschitz(s, BOX)

@@ -75,8 +75,8 @@ def test_result_fields_are_typed_not_any(cls, fields):
 
 
 def _type_namespace() -> dict[str, object]:
+    from drip_cert.analysis.contraction.lmi import MetricResult
     from drip_cert.analysis.iss import DeltaISSResult
-    from drip_cert.analysis.lmi import MetricResult
     from drip_cert.bounds.certificate import Certificate
     from drip_cert.bounds.l1drac.system import L1Section
     from drip_cert.bounds.tasil.certificate import TasilCertificate

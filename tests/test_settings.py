@@ -309,7 +309,7 @@ def test_constant_names_are_the_l1drac_real_constants():
 
 
 def test_uncertainty_constants_validates_a_plain_mapping(tmp_path):
-    from drip_cert.analysis.constants import uncertainty_constants
+    from drip_cert.analysis.growth.constants import uncertainty_constants
 
     s = load_spec(write(tmp_path, "")).system
     with pytest.raises(SpecError, match=r"constants\.L_muu.*Did you mean L_mu"):

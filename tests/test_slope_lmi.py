@@ -6,9 +6,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from drip_cert.analysis.closed_loop import AffineBlocks
-from drip_cert.analysis.learned_loop import best_global_rate, lipschitz_rate
-from drip_cert.analysis.slope_lmi import (
+from drip_cert.analysis.contraction.learned_loop import best_global_rate, lipschitz_rate
+from drip_cert.analysis.contraction.slope_lmi import (
     box_slope_bnb,
     lmi_matrix,
     sampled_slopes,
@@ -17,6 +16,7 @@ from drip_cert.analysis.slope_lmi import (
     trace_obstruction,
     verify_slope_lmi,
 )
+from drip_cert.analysis.growth.closed_loop import AffineBlocks
 from drip_cert.learn.imitation import learned_system
 from drip_cert.model.mlp import MLP
 from drip_cert.spec import load_spec

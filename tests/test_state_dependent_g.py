@@ -17,7 +17,7 @@ import sympy as sp
 
 from drip_cert import System, certify
 from drip_cert._jax import jnp
-from drip_cert.analysis.constants import input_constants
+from drip_cert.analysis.growth.constants import input_constants
 from drip_cert.errors import SpecError
 from drip_cert.model.numeric import closed_loop_jacobian
 from drip_cert.sim.config import SimConfig
@@ -41,7 +41,7 @@ to the order of a 1-term product and a 2-term sum, a few ulps per step over 100 
 
 SUP_RTOL = 1e-3
 """The branch and bound of a sup of ||g|| stops within G_RTOL = 1e-3 of a sampled value
-(analysis/constants.py); the bound can exceed the true sup by at most that much."""
+(analysis/growth/constants.py); the bound can exceed the true sup by at most that much."""
 
 X1, X2 = sp.symbols("x1 x2", real=True)
 

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from drip_cert.analysis.learned_loop import sup_policy_difference
+from drip_cert.analysis.contraction.learned_loop import sup_policy_difference
 from drip_cert.bounds.tasil.tube import (
     box_tubes,
     horizon_factor_up,

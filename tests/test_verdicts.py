@@ -280,7 +280,7 @@ def test_estimated_unmatched_constant_makes_a7_and_design_estimates(tmp_path, mo
     """Old code: a sampled L_mu_perp of 6.5e-123 (true 85.8) made Assumption 7 'hold, sound' and
     the design 'exact'."""
     import drip_cert.bounds.certificate as C
-    from drip_cert.analysis.constants import UncertaintyConstants
+    from drip_cert.analysis.growth.constants import UncertaintyConstants
 
     spec = spec_of(tmp_path, UNMATCHED)
     real = C.uncertainty_constants
@@ -302,7 +302,7 @@ def test_estimated_unmatched_constant_makes_a7_and_design_estimates(tmp_path, mo
 def test_a7_with_nan_constant_is_unknown(tmp_path, monkeypatch):
     """Old code: max(Delta_mu_perp, L_mu_perp) silently dropped a NaN."""
     import drip_cert.bounds.certificate as C
-    from drip_cert.analysis.constants import UncertaintyConstants
+    from drip_cert.analysis.growth.constants import UncertaintyConstants
 
     spec = spec_of(tmp_path, UNMATCHED)
     real = C.uncertainty_constants

@@ -19,19 +19,23 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from drip_cert.analysis.block_enclosure import block_enclose_callback
-from drip_cert.analysis.constants import (
+from drip_cert.analysis.contraction.coordinates import CoordinateChange, coordinates_from_metric
+from drip_cert.analysis.contraction.invariance import (
+    InvariantSet,
+    best_invariant_set,
+    invariant_box,
+)
+from drip_cert.analysis.contraction.learned_loop import best_global_rate, sup_policy_difference
+from drip_cert.analysis.contraction.mlp_loop import system_mlps
+from drip_cert.analysis.contraction.rate import ContractionResult, contraction_rate
+from drip_cert.analysis.growth.constants import (
     InputConstants,
     UncertaintyConstants,
     input_constants,
     uncertainty_constants,
 )
-from drip_cert.analysis.contraction import ContractionResult, contraction_rate
-from drip_cert.analysis.coordinates import CoordinateChange, coordinates_from_metric
-from drip_cert.analysis.invariance import InvariantSet, best_invariant_set, invariant_box
 from drip_cert.analysis.iss import delta_iss
-from drip_cert.analysis.learned_loop import best_global_rate, sup_policy_difference
-from drip_cert.analysis.mlp_loop import system_mlps
+from drip_cert.analysis.networks.block_enclosure import block_enclose_callback
 from drip_cert.bounds.l1drac.system import l1_section
 from drip_cert.bounds.tasil.tube import expert_tube_bound, horizon_factor_up
 from drip_cert.errors import AssumptionViolation, DripCertError
@@ -53,8 +57,8 @@ from drip_cert.spec.load import Spec, SpecSource, as_spec
 from drip_cert.spec.settings import ContractionSettings, Settings
 
 if TYPE_CHECKING:
+    from drip_cert.analysis.contraction.lmi import MetricResult
     from drip_cert.analysis.iss import DeltaISSResult
-    from drip_cert.analysis.lmi import MetricResult
     from drip_cert.bounds.l1drac.system import L1Section
     from drip_cert.bounds.tasil.certificate import TasilCertificate
     from drip_cert.learn.imitation import DemonstrationSet
@@ -135,8 +139,8 @@ def _metric(
     enclose: Any = None,
 ) -> Any:
     """The LMI contraction metric of a closed loop on the contraction region (``kappa`` bounds
-    ``cond P``; default that of :func:`~drip_cert.analysis.lmi.contraction_metric`)."""
-    from drip_cert.analysis.lmi import (  # cvxpy: keep off the API's import path
+    ``cond P``; default that of :func:`~drip_cert.analysis.contraction.lmi.contraction_metric`)."""
+    from drip_cert.analysis.contraction.lmi import (  # cvxpy: keep off the API's import path
         DEFAULT_KAPPA,
         contraction_metric,
     )
@@ -1155,7 +1159,8 @@ def _learned_contraction(
     s: System, opts: ContractionSettings, lam_ex: Quantity, notes: list[str]
 ) -> ContractionAnalysis:
     """The learned loop's rate: first the global routes for loops affine in MLP blocks
-    (:mod:`drip_cert.analysis.learned_loop`; L1-DRAC needs all of R^n), then, when they prove
+    (:mod:`drip_cert.analysis.contraction.learned_loop`; L1-DRAC needs all of R^n), then, when they
+    prove
     nothing, the configured route on the contraction region (a box result)."""
     reasons: list[str] = []
     g = best_global_rate(s, lam_ex, reasons)

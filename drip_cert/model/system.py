@@ -270,7 +270,7 @@ class System:
         """States at which a state-dependent g is checked at load: the support's centre and
         corners (at most :data:`RANK_CHECK_CORNERS` of them); ``[None]`` for ``g(t)``. A quick
         sanity check only: the certificate bounds ``sigma_min(g)`` from below on a box
-        (analysis/constants.py)."""
+        (analysis/growth/constants.py)."""
         if not self.g_depends_on_x:
             return [None]
         box = np.asarray(self.support, dtype=float)

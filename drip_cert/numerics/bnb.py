@@ -19,8 +19,8 @@ up to ``batch`` of the sub-boxes with the largest bounds (the round size doublin
 bounds all children in one call; ``batch = 1`` is the one-box-at-a-time search, bit for bit. The
 heap covers the box in both, so the bound is sound for every ``batch``.
 
-Users: :func:`drip_cert.analysis.contraction.contraction_rate` (``max mu_2`` of an interval
-Jacobian, docs/math/contraction.md section 3.4) and :mod:`drip_cert.analysis.expr_sup` (the
+Users: :func:`drip_cert.analysis.contraction.rate.contraction_rate` (``max mu_2`` of an interval
+Jacobian, docs/math/contraction.md section 3.4) and :mod:`drip_cert.analysis.growth.expr_sup` (the
 one-dimensional and small-box suprema of the growth constants, docs/math/l1drac.md section 2).
 """
 

@@ -461,7 +461,8 @@ def sym_lambda_max_upper(S, R=None) -> np.ndarray | float:
     Batched over leading axes (``S`` of shape ``(..., n, n)``); a float result per matrix, ``inf``
     where the bound fails (non-finite input, or an eigenvector matrix far from orthogonal).
 
-    Method (the floating-point twin of :func:`drip_cert.analysis.lognorm.lambda_max_upper`): ``H``
+    Method (the floating-point twin of
+    :func:`drip_cert.analysis.contraction.lognorm.lambda_max_upper`): ``H``
     the float symmetric part (its rounding is added to ``R``), ``Q`` the float eigenvectors of
     ``H``; ``M = Q^T H Q`` and ``E = Q^T Q - I`` are computed with entrywise error bounds
     (:func:`matmul_bounds`). For ``x = Q y``: ``x^T H x = y^T (Q^T H Q) y <= g ||y||^2`` with

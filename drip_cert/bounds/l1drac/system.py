@@ -25,7 +25,7 @@ from typing import Any
 
 import numpy as np
 
-from drip_cert.analysis.closed_loop import closed_loop_constants
+from drip_cert.analysis.growth.closed_loop import closed_loop_constants
 from drip_cert.bounds.l1drac.constants import L1Constants
 from drip_cert.bounds.l1drac.decomposition import L1Decomposition, decompose
 from drip_cert.bounds.l1drac.designer import TradeoffRow, design, tradeoff_table

@@ -13,8 +13,8 @@ import numpy as np
 import sympy as sp
 
 from drip_cert._jax import jax, jnp
-from drip_cert.analysis.learned_loop import difference_jacobian_bound
-from drip_cert.analysis.policy_regularity import (
+from drip_cert.analysis.contraction.learned_loop import difference_jacobian_bound
+from drip_cert.analysis.networks.policy_regularity import (
     difference_jacobian_lipschitz,
     jacobian_lipschitz,
 )
@@ -132,7 +132,8 @@ def tasil_section(
     room
         How far the learned trajectory may stray from the expert's before leaving the region
         where the expert's rate is proved (``inf`` for a global rate; the room of a proved
-        forward-invariant ball otherwise, :mod:`drip_cert.analysis.invariance`). The lemma's tube
+        forward-invariant ball otherwise, :mod:`drip_cert.analysis.contraction.invariance`). The
+        lemma's tube
         radius ``R`` is capped below it, so that the gap bound keeps the learned trajectory there.
     speed_sound
         Whether the expert's speed is proved non-increasing along its trajectories (the rate holds
@@ -155,7 +156,8 @@ def tasil_section(
         ``quantities`` are the inputs the TaSIL check rests on (``L_dpi_*``, ``h0``, ``h1``), each
         with its computed label. ``L_Delta`` is the smaller of the triangle bound
         ``L_dpi(pi_IL) + L_dpi(pi*)`` and a bound on the difference ``pi_IL - pi*`` itself
-        (:func:`~drip_cert.analysis.policy_regularity.difference_jacobian_lipschitz`; used only
+        (:func:`~drip_cert.analysis.networks.policy_regularity.difference_jacobian_lipschitz`; used
+        only
         when it is not an estimate).
     """
     # the tube of assumption A2: the box around all expert states, enlarged by the tube radius

@@ -36,8 +36,8 @@ from typing import Any
 import numpy as np
 from flint import arb
 
-from drip_cert.analysis.block_enclosure import block_enclose_callback
-from drip_cert.analysis.learned_loop import sup_policy_difference
+from drip_cert.analysis.contraction.learned_loop import sup_policy_difference
+from drip_cert.analysis.networks.block_enclosure import block_enclose_callback
 from drip_cert.errors import SpecError
 from drip_cert.numerics.bnb import maximize
 from drip_cert.numerics.interval import MatrixEnclosure, UnsupportedExpression, enclose_expr
@@ -389,7 +389,8 @@ def tube_bound(
 
     ``sup_fn(box, ball)`` returns a sound ``Quantity`` bounding ``sup ||pi_IL - pi*||`` over
     ``box cap B(ball)`` (``ball = (centre, radius)`` or ``None`` for the box alone, see
-    :func:`~drip_cert.analysis.learned_loop.sup_policy_difference`); ``H_full`` the sup over all
+    :func:`~drip_cert.analysis.contraction.learned_loop.sup_policy_difference`); ``H_full`` the sup
+    over all
     of ``S`` when already known (reused where the set is all of ``S``). The caller guarantees the
     hypotheses: both rates proved on all ``x``, all ``t``, the expert loop autonomous, ``S``
     proved to hold every expert trajectory from the support on ``[0, T]``. Without ``S`` the
@@ -472,7 +473,8 @@ def expert_tube_bound(
     """:func:`tube_bound` when its hypotheses are proved, else ``None``.
 
     ``r``, ``rl``: the expert's and the learned loop's Euclidean
-    :class:`~drip_cert.analysis.contraction.ContractionResult`; each must hold, be proved (not an
+    :class:`~drip_cert.analysis.contraction.rate.ContractionResult`; each must hold, be proved (not
+    an
     estimate), on all ``x`` and (the expert's) for ``t`` in ``[0, T]``. ``g_norm``: the
     ``Quantity`` ``sup||g||_2``; ``S`` a box proved to hold the expert trajectories (or
     ``None``: the tube's own ball) and ``uniform_h0`` the sound sup over all of it (or ``None``).

@@ -1,7 +1,7 @@
 """Rigorous supremum of a scalar sympy expression over a box (used by the growth constants).
 
 The expression comes as several equivalent forms (rewritings by sympy, see
-:mod:`drip_cert.analysis.growth_rewrites`); the upper bound on a box is the smallest of their
+:mod:`drip_cert.analysis.growth.rewrites`); the upper bound on a box is the smallest of their
 interval enclosures (natural extension intersected with the mean-value form), each rigorous, so
 the smallest is too. The supremum over the box is then bounded by the one branch and bound of
 :mod:`drip_cert.numerics.bnb`, sampling the first form that ``lambdify`` accepts at box centres

@@ -13,7 +13,8 @@ with constant ``A`` and ``T_k``. The closed-loop Jacobian of the paper's example
 
 Bound on one box ``B = [c - r, c + r]`` (:func:`box_bounds`). Let ``[J_c]`` enclose ``M(c)``,
 ``[H_B]`` enclose the derivative ``dM/dx_l`` over ``B`` (both from the MLP enclosures of
-:mod:`drip_cert.analysis.mlp.derivatives`, contracted with ``T_k``), ``J0`` the float midpoint of
+:mod:`drip_cert.analysis.networks.mlp.derivatives`, contracted with ``T_k``), ``J0`` the float
+midpoint of
 ``[J_c]`` and ``G_l`` the float midpoint of the enclosure of ``dM/dx_l(c)``. By the mean value
 theorem applied to each entry,
 
@@ -57,9 +58,9 @@ from dataclasses import dataclass
 import numpy as np
 import sympy as sp
 
-from drip_cert.analysis.closed_loop import CONVERSION_ULPS
-from drip_cert.analysis.mlp import jacobian_np
-from drip_cert.analysis.mlp.derivatives import enclose_box_and_centre
+from drip_cert.analysis.growth.closed_loop import CONVERSION_ULPS
+from drip_cert.analysis.networks.mlp import jacobian_np
+from drip_cert.analysis.networks.mlp.derivatives import enclose_box_and_centre
 from drip_cert.errors import SpecError
 from drip_cert.model.blocks import BlockFunction, block_applications
 from drip_cert.model.mlp import MLP
@@ -114,7 +115,8 @@ class JacobianInBlocks:
     """``M(x) = A + sum_k T_k : D h_k(x)``; ``A`` is ``(p, q)``, ``T[k]`` ``(p, q, out_k, d)``.
 
     ``A_rad``, ``T_rad`` bound the distance of the float coefficients to the exact ones
-    (:data:`~drip_cert.analysis.closed_loop.CONVERSION_ULPS` spacings of the sympy constants).
+    (:data:`~drip_cert.analysis.growth.closed_loop.CONVERSION_ULPS` spacings of the sympy
+    constants).
     """
 
     A: np.ndarray

@@ -24,11 +24,13 @@ Assumption 2 / L1-DRAC Assumption 2 on all of ``R^n``. On a box the ranges
 ``[alpha_i, beta_i]`` shrink to the slopes over each neuron's pre-activation interval on the box
 (interval bounds through the layers), and the rate holds on the box.
 
-Solve, re-check, verify (as :mod:`drip_cert.analysis.lmi`): cvxpy (Clarabel for small LMIs,
+Solve, re-check, verify (as :mod:`drip_cert.analysis.contraction.lmi`): cvxpy (Clarabel for small
+LMIs,
 SCS above), only ``OPTIMAL`` accepted; the multipliers ``t`` (and ``P``) are kept and the best
 ``lambda`` for them is recomputed by a Schur complement in floats; the LMI at a slightly smaller
 ``lambda`` is then assembled in Arb (the coefficient conversion radius of ``A``, ``C_k`` as ball
-radii) and its largest eigenvalue bounded rigorously (:func:`~drip_cert.analysis.lognorm.
+radii) and its largest eigenvalue bounded rigorously
+(:func:`~drip_cert.analysis.contraction.lognorm.
 lambda_max_upper`): strictly negative or no certificate.
 
 Necessary condition (:func:`trace_obstruction`). For every ``P > 0``,
@@ -51,8 +53,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from flint import arb, arb_mat
 
-from drip_cert.analysis.closed_loop import CONVERSION_ULPS, AffineBlocks
-from drip_cert.analysis.lognorm import lambda_max_upper
+from drip_cert.analysis.contraction.lognorm import lambda_max_upper
+from drip_cert.analysis.growth.closed_loop import CONVERSION_ULPS, AffineBlocks
 from drip_cert.errors import SpecError
 from drip_cert.model.activations import Identity
 from drip_cert.model.mlp import MLP
@@ -342,9 +344,9 @@ def verify_slope_lmi(st: SlopeStructure, P: np.ndarray, t: np.ndarray, lam: floa
     """Rigorously check ``P > 0``, ``t >= 0`` and ``M(P, t, lam) < 0`` (11.3).
 
     ``M`` is assembled in Arb: ``A`` and ``C_k`` as balls of their conversion radius
-    (:data:`~drip_cert.analysis.closed_loop.CONVERSION_ULPS` spacings), the weights, slopes,
+    (:data:`~drip_cert.analysis.growth.closed_loop.CONVERSION_ULPS` spacings), the weights, slopes,
     ``P``, ``t`` and ``lam`` as the exact floats they are; ``lambda_max`` of the ball matrix is
-    bounded by :func:`~drip_cert.analysis.lognorm.lambda_max_upper` (midpoint + radius).
+    bounded by :func:`~drip_cert.analysis.contraction.lognorm.lambda_max_upper` (midpoint + radius).
     """
     P = np.asarray(P, float)
     t = np.asarray(t, float)

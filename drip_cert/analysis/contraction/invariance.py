@@ -197,7 +197,7 @@ def invariant_ball(
             room,
             f"the ball ||x - x0|| <= {r:.6g} around x0 = {_fmt(centre)} (sup_t ||F(t, x0)|| <= "
             f"{eps:.3g}, so r >= eps/lambda = {eps / lam:.3g}) contains the support and lies in "
-            f"the box with room {room:.6g}: forward invariant (analysis/invariance.py)",
+            f"the box with room {room:.6g}: forward invariant (analysis/contraction/invariance.py)",
         )
     return InvariantSet(
         False,
@@ -301,7 +301,7 @@ def best_invariant_set(
             room,
             f"the box {sb} contains the support and is forward invariant (Nagumo: every face "
             f"checked by rigorous interval enclosure), inside the box where the rate holds with "
-            f"room {room:.6g} (analysis/invariance.py)",
+            f"room {room:.6g} (analysis/contraction/invariance.py)",
         )
     return best
 

@@ -9,14 +9,15 @@ by the Euclidean norm. :func:`contraction_rate` returns the largest ``lambda`` i
 * ``'interval-bnb'``: a *sound* lower bound on the rate over a box of states (and a time range):
   rigorous interval enclosures of the Jacobian entries on sub-boxes
   (:class:`~drip_cert.numerics.interval.MatrixEnclosure`), a rigorous Rohn-type bound of ``mu_2`` of
-  the interval matrix (:func:`~drip_cert.analysis.lognorm.mu2_interval_upper`), and branch and bound
+  the interval matrix (:func:`~drip_cert.analysis.contraction.lognorm.mu2_interval_upper`), and
+  branch and bound
   that splits the worst sub-box along its widest (relative) side until the global upper bound is
   within ``tol`` of the best sampled value or the box budget is spent. A Jacobian that depends on
   ``t`` only is treated the same way over the time range, and then holds for all ``x``.
 * ``'mlp-bnb'``: a *sound* bound over a box for a Jacobian affine in the Jacobians of MLP blocks
   applied to the state (``J = A + sum_k C_k D h_k(x)``, the learned loops of the paper's
   example), when the MLPs are passed as ``mlps``: the vectorised branch and bound of
-  :mod:`drip_cert.analysis.mlp_loop` (Hessian enclosures of the networks, a centred
+  :mod:`drip_cert.analysis.contraction.mlp_loop` (Hessian enclosures of the networks, a centred
   linearisation whose ``mu_2`` is convex in ``x`` and so bounded at the vertices, the remainder
   by Weyl; second order in the sub-box size). ``'auto'`` prefers it when it applies.
 * ``'sampled'``: dense grid + random points + local maximisation (scipy L-BFGS-B). This is an
@@ -40,8 +41,8 @@ import numpy as np
 import sympy as sp
 from scipy.optimize import minimize
 
-from drip_cert.analysis.lognorm import mu2_constant_bounds, mu2_interval_upper, mu_2
-from drip_cert.analysis.mlp_loop import DEFAULT_BATCH, box_bounds, decompose_jacobian
+from drip_cert.analysis.contraction.lognorm import mu2_constant_bounds, mu2_interval_upper, mu_2
+from drip_cert.analysis.contraction.mlp_loop import DEFAULT_BATCH, box_bounds, decompose_jacobian
 from drip_cert.errors import SolverError, SpecError
 from drip_cert.model.mlp import MLP
 from drip_cert.numerics.bnb import maximize
@@ -690,7 +691,8 @@ def _mlp_bnb(
     sampling: SamplingOptions,
 ) -> ContractionResult:
     """The ``'mlp-bnb'`` route: :func:`~drip_cert.numerics.bnb_batch.maximize_batch` of the
-    vertex bound :func:`~drip_cert.analysis.mlp_loop.box_bounds` (sound on every sub-box), started
+    vertex bound :func:`~drip_cert.analysis.contraction.mlp_loop.box_bounds` (sound on every
+    sub-box), started
     from the sampled maximum."""
     n = box.shape[0]
 

@@ -35,9 +35,9 @@ from dataclasses import dataclass
 import numpy as np
 import sympy as sp
 
-from drip_cert.analysis.constants import batch_fn
-from drip_cert.analysis.growth import growth_bound, sup_bound
-from drip_cert.analysis.mlp import enclose_output, lipschitz_bound
+from drip_cert.analysis.growth.constants import batch_fn
+from drip_cert.analysis.growth.regularity import growth_bound, sup_bound
+from drip_cert.analysis.networks.mlp import enclose_output, lipschitz_bound
 from drip_cert.model.activations import Identity
 from drip_cert.model.blocks import block_applications
 from drip_cert.model.mlp import MLP
@@ -207,9 +207,9 @@ def diffusion_growth(s: System, Delta_p: Quantity | None = None) -> tuple[Diffus
         The system.
     Delta_p
         ``Delta_p`` with ``||p(t, x)||_F^2 <= Delta_p^2 (1 + ||x||^2)^{1/2}`` (L1-DRAC Assumption 1
-        as :func:`~drip_cert.analysis.constants.uncertainty_constants` computes it, or the
+        as :func:`~drip_cert.analysis.growth.constants.uncertainty_constants` computes it, or the
         user's ``[constants]`` value); computed here by
-        :func:`~drip_cert.analysis.growth.growth_bound` when ``None``.
+        :func:`~drip_cert.analysis.growth.regularity.growth_bound` when ``None``.
 
     Returns
     -------
@@ -219,7 +219,8 @@ def diffusion_growth(s: System, Delta_p: Quantity | None = None) -> tuple[Diffus
         depend on the state, ``Delta_p`` bounds ``sup_t ||p(t)||_F`` itself (the supremum of
         the ratio is attained at ``x = 0``), so ``a0 = Delta_p^2``, ``a1 = a2 = 0`` (exact for a
         constant ``p``); when the entries of ``p`` have finite whole-space enclosures
-        (:func:`~drip_cert.analysis.growth.sup_bound`), ``a0 = sup ||p||_F^2``, ``a1 = a2 = 0``.
+        (:func:`~drip_cert.analysis.growth.regularity.sup_bound`), ``a0 = sup ||p||_F^2``, ``a1 = a2
+        = 0``.
         Squares are rounded up.
     """
     p = s.diffusion

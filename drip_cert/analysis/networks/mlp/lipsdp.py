@@ -1,6 +1,6 @@
 """Lipschitz bounds of an MLP by LipSDP-Neuron (Fazlyab et al. 2019), re-checked rigorously, and
 :func:`lipschitz_bound`, the best sound Lipschitz constant (the smaller of LipSDP and the layer
-product of :mod:`drip_cert.analysis.mlp.lipschitz`).
+product of :mod:`drip_cert.analysis.networks.mlp.lipschitz`).
 
 The LipSDP certificate is re-checked with a rigorous upper bound of the largest eigenvalue of
 the LMI matrix (its float assembly error bounded entrywise); the solver's float is never used
@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from drip_cert.analysis.mlp.lipschitz import lipschitz_product, spectral_norm_up
+from drip_cert.analysis.networks.mlp.lipschitz import lipschitz_product, spectral_norm_up
 from drip_cert.errors import SpecError
 from drip_cert.model.mlp import MLP
 from drip_cert.numerics.rounding import (

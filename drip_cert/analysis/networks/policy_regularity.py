@@ -1,7 +1,8 @@
 """Regularity of a policy's Jacobian: a bound on ``L_dpi`` (DRIP Assumption "PolicyRegularity" (b)).
 
 Routes, strongest first: an affine policy (exact 0); a policy affine in MLP blocks applied to the
-state (the layerwise bound of :mod:`drip_cert.analysis.mlp.lipschitz`, global); a policy without
+state (the layerwise bound of :mod:`drip_cert.analysis.networks.mlp.lipschitz`, global); a policy
+without
 blocks on a box (interval enclosures of its second derivatives, valid on that box only); otherwise
 a sampled estimate. A kink of the Jacobian (``Abs``, ``Max``, ``Min``) anywhere the policy is used
 makes the constant infinite: the assumption fails there.
@@ -14,9 +15,9 @@ import math
 import numpy as np
 import sympy as sp
 
-from drip_cert.analysis.closed_loop import CONVERSION_ULPS, affine_in_blocks
-from drip_cert.analysis.mlp import jacobian_lipschitz_bound
-from drip_cert.analysis.mlp.derivatives import enclose_derivatives
+from drip_cert.analysis.growth.closed_loop import CONVERSION_ULPS, affine_in_blocks
+from drip_cert.analysis.networks.mlp import jacobian_lipschitz_bound
+from drip_cert.analysis.networks.mlp.derivatives import enclose_derivatives
 from drip_cert.model.blocks import block_applications
 from drip_cert.model.system import System
 from drip_cert.numerics.interval import UnsupportedExpression, compile_enclosure, enclose_expr
@@ -59,7 +60,8 @@ def jacobian_lipschitz(s: System, which: str, box: np.ndarray | None = None) -> 
 
     Routes: zero Hessian (affine policy, exact 0); a policy ``A x + b + C h(x)`` linear in MLP
     blocks applied to the state gives ``sum ||C_h||_2 L_dh`` with the sound layerwise bound of
-    :func:`drip_cert.analysis.mlp.jacobian_lipschitz_bound` (global); a policy without blocks
+    :func:`drip_cert.analysis.networks.mlp.jacobian_lipschitz_bound` (global); a policy without
+    blocks
     gets a sound bound on ``box`` from interval enclosures of its second derivatives
     (``||d^2 pi|| <= ||d^2 pi||_F``), valid on that box only; anything else is a sampled
     estimate of ``sup ||d^2 pi||_F`` (labelled so).
@@ -220,9 +222,11 @@ def local_jacobian_lipschitz(
     applied to the state. The box is cut into ``k^n <= LOCAL_SUBBOXES`` equal sub-boxes; on each,
     ``[D^2 pol] = [D^2 r] + sum_h [C_h] [D^2 h]``: ``D^2 r`` by the rigorous interval extension of
     :mod:`drip_cert.numerics.interval`, ``D^2 h`` by the batched enclosures of
-    :func:`~drip_cert.analysis.mlp.derivatives.enclose_derivatives` (each neuron's slope and
+    :func:`~drip_cert.analysis.networks.mlp.derivatives.enclose_derivatives` (each neuron's slope
+    and
     curvature ranges restricted to the sub-box: local, not the global layer product), ``C_h``
-    widened by :data:`~drip_cert.analysis.closed_loop.CONVERSION_ULPS` spacings. For ``x, y`` in
+    widened by :data:`~drip_cert.analysis.growth.closed_loop.CONVERSION_ULPS` spacings. For ``x, y``
+    in
     the (convex) box, ``D pol(x) - D pol(y) = int_0^1 D^2 pol(y + t (x - y)) [x - y] dt`` and
     ``||D^2 pol [v]||_2 <= ||D^2 pol||_F ||v||``, so the largest Frobenius norm of the enclosures
     (rounded up) is the constant, valid on the box (DRIP Assumption PolicyRegularity (b) there).
@@ -385,7 +389,7 @@ def _split_blocks(pol: sp.MatrixBase, s: System):
 
 def _converted(v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """An interval around float coefficients read from sympy constants: ``CONVERSION_ULPS``
-    spacings each way (:data:`~drip_cert.analysis.closed_loop.CONVERSION_ULPS`)."""
+    spacings each way (:data:`~drip_cert.analysis.growth.closed_loop.CONVERSION_ULPS`)."""
     rad = up_np(CONVERSION_ULPS * np.spacing(np.abs(v)))
     return sub_down_np(v, rad), add_up_np(v, rad)
 

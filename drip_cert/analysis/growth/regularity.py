@@ -46,9 +46,9 @@ Routes, each giving a sound upper bound where it applies (the smallest one is re
     (:func:`drip_cert.numerics.sampling.growth_ratio_estimate` and
     :func:`~drip_cert.numerics.sampling.holder_estimate`), labelled "estimate, not a bound".
 
-The field and the routes' building blocks are in :mod:`drip_cert.analysis.growth_field`, the
-symbolic rewritings in :mod:`drip_cert.analysis.growth_rewrites`, the branch and bound of each
-supremum in :mod:`drip_cert.analysis.expr_sup`.
+The field and the routes' building blocks are in :mod:`drip_cert.analysis.growth.field`, the
+symbolic rewritings in :mod:`drip_cert.analysis.growth.rewrites`, the branch and bound of each
+supremum in :mod:`drip_cert.analysis.growth.expr_sup`.
 
 Time dependence: ``t`` is one more interval variable over ``t_range = (t0, T)``. The paper asks
 for the constants for all ``t >= 0``; their supremum over ``[0, T]`` suffices for a certificate
@@ -69,9 +69,9 @@ import numpy as np
 import sympy as sp
 from flint import arb
 
-from drip_cert.analysis.expr_sup import BNB_ATOL, BNB_MAX_SPLITS, BNB_RTOL
-from drip_cert.analysis.growth_field import GrowthField
-from drip_cert.analysis.growth_rewrites import rewritings, sum_sq
+from drip_cert.analysis.growth.expr_sup import BNB_ATOL, BNB_MAX_SPLITS, BNB_RTOL
+from drip_cert.analysis.growth.field import GrowthField
+from drip_cert.analysis.growth.rewrites import rewritings, sum_sq
 from drip_cert.numerics.rounding import arb_hi, arb_norm2_up
 from drip_cert.numerics.sampling import (
     SAMPLE_RADII,

@@ -1,11 +1,11 @@
 """Symbolic rewritings behind the growth constants: radial profiles and equivalent forms.
 
 * :func:`radial_profile` finds ``G`` with ``vec F(a) = G(||a||)`` (the radial route of
-  :mod:`drip_cert.analysis.growth`; docs/math/l1drac.md section 2), by substituting
+  :mod:`drip_cert.analysis.growth.regularity`; docs/math/l1drac.md section 2), by substituting
   ``||a||^2 = rho^2`` and checking that no state is left.
 * :func:`rewritings` gives equivalent forms of a list of expressions (``expand``, ``cancel``,
   ``powsimp``, ``simplify``); the enclosure of a box is the best of theirs
-  (:func:`drip_cert.analysis.expr_sup.expr_sup`), each being rigorous.
+  (:func:`drip_cert.analysis.growth.expr_sup.expr_sup`), each being rigorous.
 * :func:`sum_sq` is the squared norm on which branch and bound runs.
 """
 

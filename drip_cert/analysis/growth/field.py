@@ -1,7 +1,7 @@
 """The field whose growth constants are sought, and the sound routes' building blocks.
 
 :class:`GrowthField` holds ``vec F`` with the states and the time replaced by real dummy symbols
-and computes, with caching, what the routes of :mod:`drip_cert.analysis.growth` need
+and computes, with caching, what the routes of :mod:`drip_cert.analysis.growth.regularity` need
 (docs/math/l1drac.md section 2):
 
 * route (a), *bounded*: rigorous enclosures of expressions over the whole space
@@ -13,7 +13,8 @@ and computes, with caching, what the routes of :mod:`drip_cert.analysis.growth` 
   over ``rho = ||a|| in [0, 1]`` and the tail ``w = 1 / rho in [0, 1]``;
 * suprema over time of state-free squares.
 
-Every supremum is an upper bound from :func:`drip_cert.analysis.expr_sup.expr_sup` (branch and
+Every supremum is an upper bound from :func:`drip_cert.analysis.growth.expr_sup.expr_sup` (branch
+and
 bound on squared norms) with a rigorously rounded root (:func:`~drip_cert.numerics.rounding.
 arb_sqrt_up`).
 """
@@ -27,8 +28,8 @@ import numpy as np
 import sympy as sp
 from flint import arb
 
-from drip_cert.analysis.expr_sup import expr_sup
-from drip_cert.analysis.growth_rewrites import radial_profile, rewritings, sum_sq
+from drip_cert.analysis.growth.expr_sup import expr_sup
+from drip_cert.analysis.growth.rewrites import radial_profile, rewritings, sum_sq
 from drip_cert.numerics.interval import UnsupportedExpression, compile_enclosure
 from drip_cert.numerics.rounding import arb_hi, arb_lo, arb_sqrt_up, nonneg_spectral_norm_upper
 

@@ -27,16 +27,19 @@ Route "perturbation-of-expert" (the issue's ``lambda_IL >= lambda* - ||g|| sup |
 
 Route "slope-lmi" (the loop itself, neuron by neuron; docs/math/contraction.md section 11).
     Every neuron of every block is slope-restricted; the S-procedure LMI of
-    :mod:`drip_cert.analysis.slope_lmi` with ``P = I`` proves ``mu_2(J(x)) <= -lambda`` for every
+    :mod:`drip_cert.analysis.contraction.slope_lmi` with ``P = I`` proves ``mu_2(J(x)) <= -lambda``
+    for every
     x, verified in Arb. When the trace condition rules every such LMI out, its number is the
     route's reason.
 
 Floating point: the coefficients are read from sympy with ``float()`` (within
-:data:`~drip_cert.analysis.closed_loop.CONVERSION_ULPS` spacings of the true ones); ``mu_2(A)``
-is bounded in Arb (:func:`~drip_cert.analysis.lognorm.mu2_constant_bounds`) and widened by the
+:data:`~drip_cert.analysis.growth.closed_loop.CONVERSION_ULPS` spacings of the true ones);
+``mu_2(A)``
+is bounded in Arb (:func:`~drip_cert.analysis.contraction.lognorm.mu2_constant_bounds`) and widened
+by the
 Frobenius norm of the conversion radius (Weyl); norms are rigorous upper bounds and every sum and
 product is rounded up. The Lipschitz constants come from
-:func:`~drip_cert.analysis.mlp.lipschitz_bound` (the smaller of the layer product and the
+:func:`~drip_cert.analysis.networks.mlp.lipschitz_bound` (the smaller of the layer product and the
 verified LipSDP bound), with their own provenance: the rate's ``how`` is derived from them.
 """
 
@@ -50,17 +53,17 @@ from dataclasses import dataclass
 import numpy as np
 import sympy as sp
 
-from drip_cert.analysis.closed_loop import CONVERSION_ULPS, AffineBlocks, affine_in_blocks
-from drip_cert.analysis.contraction import ContractionResult
-from drip_cert.analysis.lognorm import mu2_constant_bounds
-from drip_cert.analysis.mlp import (
+from drip_cert.analysis.contraction.lognorm import mu2_constant_bounds
+from drip_cert.analysis.contraction.rate import ContractionResult
+from drip_cert.analysis.contraction.slope_lmi import slope_lmi_rate, slope_structure
+from drip_cert.analysis.growth.closed_loop import CONVERSION_ULPS, AffineBlocks, affine_in_blocks
+from drip_cert.analysis.networks.mlp import (
     enclose_jacobian,
     enclose_jacobian_centred,
     enclose_output,
     lipschitz_bound,
 )
-from drip_cert.analysis.policy_regularity import difference_jacobian_lipschitz
-from drip_cert.analysis.slope_lmi import slope_lmi_rate, slope_structure
+from drip_cert.analysis.networks.policy_regularity import difference_jacobian_lipschitz
 from drip_cert.model.system import System
 from drip_cert.numerics.bnb import maximize
 from drip_cert.numerics.rounding import (
@@ -96,7 +99,8 @@ class GlobalRate:
     Attributes
     ----------
     result
-        The rate as a :class:`~drip_cert.analysis.contraction.ContractionResult` (``method`` names
+        The rate as a :class:`~drip_cert.analysis.contraction.rate.ContractionResult` (``method``
+        names
         the route; ``how`` derived from the inputs).
     rate
         The rate as a :class:`~drip_cert.provenance.Quantity` ``lambda`` (its ``how`` and
@@ -290,7 +294,8 @@ def slope_lmi_rate_global(
     s: System, which: str = "learned", reasons: list[str] | None = None
 ) -> GlobalRate | None:
     """Route "slope-lmi": ``mu_2(J(x)) <= -lambda`` for all x from the slope-restricted LMI
-    (:func:`~drip_cert.analysis.slope_lmi.slope_lmi_rate` with ``P = I``), verified in Arb.
+    (:func:`~drip_cert.analysis.contraction.slope_lmi.slope_lmi_rate` with ``P = I``), verified in
+    Arb.
 
     ``None`` when the loop is not affine in MLP blocks applied to the state or no verified rate
     exists; then the reason (the trace condition's number, the solver status, the LMI size) is
@@ -381,7 +386,7 @@ def _difference_jacobian_at(
 ):
     """Rigorous ``(lo, hi)`` of ``D Delta(x) = A + sum_k C_k Dh_k(x)`` at the point ``c`` or, with
     ``hi``, for every ``x`` in the box ``[c, hi]`` (each network's Jacobian enclosed by
-    :func:`~drip_cert.analysis.mlp.enclose_jacobian_centred` there)."""
+    :func:`~drip_cert.analysis.networks.mlp.enclose_jacobian_centred` there)."""
     A = np.asarray(dec.A, dtype=float)
     ra = CONVERSION_ULPS * np.spacing(np.abs(A))
     jlo, jhi = sub_down_np(A, ra), add_up_np(A, ra)
@@ -513,7 +518,7 @@ def sup_policy_difference(
         res.upper,
         inputs=lips,
         method=How.SOUND,
-        source="interval branch and bound over the box (analysis/learned_loop.py)",
+        source="interval branch and bound over the box (analysis/contraction/learned_loop.py)",
         note=f"over {where}: <= {res.upper:.6g} (sampled {res.lower:.6g}, "
         f"{res.n_boxes} boxes, stop {res.stop})",
     )
@@ -552,7 +557,7 @@ def _affine_sup(
         "sup||pi_IL - pi*||",
         value,
         method=How.SOUND,
-        source="vertex enumeration of an affine difference (analysis/learned_loop.py)",
+        source="vertex enumeration of an affine difference (analysis/contraction/learned_loop.py)",
         note=f"over {box.tolist()}: <= {value:.6g} ({how}, rounded up)",
     )
 
@@ -564,6 +569,6 @@ def _empty_sup(lips: list[Quantity], box: np.ndarray) -> Quantity:
         0.0,
         inputs=lips,
         method=How.SOUND,
-        source="interval branch and bound over the box (analysis/learned_loop.py)",
+        source="interval branch and bound over the box (analysis/contraction/learned_loop.py)",
         note=f"over {box.tolist()} cap the ball: empty, 0 boxes",
     )

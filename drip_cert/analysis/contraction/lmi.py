@@ -16,7 +16,8 @@ and an LMI verified at all of them holds on the whole region.
 feasibility SDP (cvxpy + Clarabel) with the normalisation ``I <= P <= kappa I``. Every solver answer
 is re-checked: anything other than ``OPTIMAL`` counts as infeasible (``OPTIMAL_INACCURATE``
 certifies nothing), and the final ``P`` is verified with rigorous outward-rounded eigenvalue
-bounds (:func:`~drip_cert.analysis.lognorm.lambda_max_upper`) on ``A_i^T P + P A_i + 2 lambda P``
+bounds (:func:`~drip_cert.analysis.contraction.lognorm.lambda_max_upper`) on ``A_i^T P + P A_i + 2
+lambda P``
 computed in Arb.
 
 The paper's bounds use the Euclidean rate; the metric rate is reported beside it with ``cond(P)``
@@ -38,7 +39,13 @@ import numpy as np
 import sympy as sp
 from flint import arb, arb_mat
 
-from drip_cert.analysis.contraction import (
+from drip_cert.analysis.contraction.lognorm import (
+    lambda_max_upper,
+    mu_2,
+    mu_2_weighted,
+    spectral_abscissa,
+)
+from drip_cert.analysis.contraction.rate import (
     JacobianFn,
     SamplingOptions,
     _check_inputs,
@@ -46,7 +53,6 @@ from drip_cert.analysis.contraction import (
     _scope,
     jacobian_function,
 )
-from drip_cert.analysis.lognorm import lambda_max_upper, mu_2, mu_2_weighted, spectral_abscissa
 from drip_cert.errors import SolverError, SpecError
 from drip_cert.numerics.interval import EncloseCallback, MatrixEnclosure, UnsupportedExpression
 from drip_cert.numerics.rounding import arb_hi
@@ -240,7 +246,7 @@ def verify_metric(As: np.ndarray, P: np.ndarray, lam: float) -> bool:
     """Rigorously check ``P > 0`` and ``A_i^T P + P A_i + 2 lam P <= 0`` for every ``A_i``.
 
     The products are formed in Arb (balls); the largest eigenvalue of each ball matrix is bounded
-    by :func:`~drip_cert.analysis.lognorm.lambda_max_upper` (midpoint + radius).
+    by :func:`~drip_cert.analysis.contraction.lognorm.lambda_max_upper` (midpoint + radius).
     """
     P = np.asarray(P, dtype=float)
     if not np.array_equal(P, P.T):
@@ -347,7 +353,7 @@ def contraction_metric(
     Vertices come from :func:`jacobian_vertices` (SOUND); when the expression has no rigorous
     enclosure or the vertex count exceeds ``max_vertices``, sampled Jacobians are used instead
     and the result is an ESTIMATE. Inputs as in
-    :func:`~drip_cert.analysis.contraction.contraction_rate`.
+    :func:`~drip_cert.analysis.contraction.rate.contraction_rate`.
     """
     t0 = time.perf_counter()
     n, states, box, t_range = _check_inputs(J, states, box, t, t_range)

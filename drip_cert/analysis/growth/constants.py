@@ -19,7 +19,8 @@ Each constant is a :class:`~drip_cert.provenance.Quantity` that records how it w
   for bounds over all of ``R^n``. When an uncertainty depends on the state only through
   ``r = ||x||`` (as in the paper's example), the supremum reduces to one dimension and is
   computed soundly; so is any uncertainty bounded on all of ``R^n`` or globally Lipschitz (see
-  :mod:`drip_cert.analysis.growth` for the routes); otherwise it is a sampled estimate over a
+  :mod:`drip_cert.analysis.growth.regularity` for the routes); otherwise it is a sampled estimate
+  over a
   large region, labelled ``estimate``, and the certificate lists it as such. A value the user
   gives in the ``[constants]`` table is taken as given.
 """
@@ -34,8 +35,13 @@ from typing import Any
 import numpy as np
 import sympy as sp
 
-from drip_cert.analysis.growth import growth_bound, holder_half_bound, lipschitz_bound, sup_bound
-from drip_cert.analysis.lognorm import mu2_interval_upper
+from drip_cert.analysis.contraction.lognorm import mu2_interval_upper
+from drip_cert.analysis.growth.regularity import (
+    growth_bound,
+    holder_half_bound,
+    lipschitz_bound,
+    sup_bound,
+)
 from drip_cert.model.system import System
 from drip_cert.numerics.bnb import maximize
 from drip_cert.numerics.interval import (
@@ -67,7 +73,7 @@ class InputConstants:
 
     Every bound is rigorous: entries of ``g(t)``, ``g'(t)`` and ``Theta_ad(t)`` are enclosed by
     outward-rounded interval arithmetic (over pieces of ``[0, T]`` when they depend on ``t``), the
-    norms bounded with Arb (:func:`~drip_cert.analysis.lognorm.mu2_interval_upper`).
+    norms bounded with Arb (:func:`~drip_cert.analysis.contraction.lognorm.mu2_interval_upper`).
     """
 
     Delta_g: Quantity  #: sup_t ||g(t)||_F (the paper's)

@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 import sympy as sp
 
-from drip_cert.analysis.lognorm import mu2_constant_bounds
+from drip_cert.analysis.contraction.lognorm import mu2_constant_bounds
 from drip_cert.errors import SpecError
 from drip_cert.numerics.rounding import mul_up, sqrt_down, sqrt_up
 

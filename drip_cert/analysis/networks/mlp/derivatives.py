@@ -7,7 +7,8 @@
 * its Hessian ``T_k = d^2 z_k / dx^2`` (``(N, n_k, in, in)``, optional),
 
 through ``a_k = W_k z_k + b_k``, ``z_{k+1} = s_k(a_k)`` (the convention of
-:mod:`drip_cert.analysis.mlp.enclosures`) by the forward-mode chain rule in interval arithmetic:
+:mod:`drip_cert.analysis.networks.mlp.enclosures`) by the forward-mode chain rule in interval
+arithmetic:
 
 ``J_a = W J_z``, ``T_a = W T_z``,
 ``J_{k+1} = diag(s'(a)) J_a``,
@@ -20,7 +21,7 @@ two intervals the four end products rounded outward, and the activation and its 
 derivatives are enclosed over each pre-activation interval from their monotone pieces
 (:func:`enclose_activation_second` for ``s''``), with the library-function error budgets of
 :mod:`drip_cert.numerics.rounding` (sound as long as numpy meets its documented accuracy, as for
-the rest of :mod:`drip_cert.analysis.mlp`).
+the rest of :mod:`drip_cert.analysis.networks.mlp`).
 
 **Centred (mean-value) pre-activations.** With ``centred=True`` the centre ``c`` of each box is
 propagated with the box (the batch doubles) and every pre-activation enclosure is intersected
@@ -40,7 +41,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from drip_cert.analysis.mlp.enclosures import check_box
+from drip_cert.analysis.networks.mlp.enclosures import check_box
 from drip_cert.errors import SpecError
 from drip_cert.model.activations import Identity, get_activation
 from drip_cert.model.mlp import MLP

@@ -3,8 +3,9 @@
 :func:`block_enclose_callback` returns the ``enclose`` callback that
 :mod:`drip_cert.numerics.interval` calls for every block application: for an MLP block it
 encloses the output (or a Jacobian entry) over the box of the arguments' enclosures by interval
-bound propagation (:func:`drip_cert.analysis.mlp.enclose_output`,
-:func:`~drip_cert.analysis.mlp.enclose_jacobian`, outward rounded). Blocks that are not MLPs
+bound propagation (:func:`drip_cert.analysis.networks.mlp.enclose_output`,
+:func:`~drip_cert.analysis.networks.mlp.enclose_jacobian`, outward rounded). Blocks that are not
+MLPs
 and Hessian entries have no enclosure here: the callback returns ``None`` and the analysis falls
 back to its sampled estimate, labelled as such.
 """
@@ -15,7 +16,7 @@ from collections.abc import Callable, Mapping
 
 import numpy as np
 
-from drip_cert.analysis.mlp import enclose_jacobian, enclose_output
+from drip_cert.analysis.networks.mlp import enclose_jacobian, enclose_output
 from drip_cert.model.blocks import Block, BlockFunction
 
 
