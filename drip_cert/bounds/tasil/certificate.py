@@ -39,6 +39,7 @@ from drip_cert.bounds.tasil.forms import (
     form_expectation,
     form_held_out,
     form_threshold,
+    form_uniform,
 )
 from drip_cert.bounds.tasil.lemma import eps_star, imitation_gap_lemma
 from drip_cert.bounds.tasil.tube import TubeBound
@@ -364,15 +365,7 @@ def tasil_certificate(
         for name in ("threshold", "expectation", "drip_shaped"):
             forms.append(TasilForm(name, math.inf, False, True, "not computed: no class constants"))
     if math.isfinite(uni):
-        forms.append(
-            TasilForm(
-                "uniform",
-                uni,
-                True,
-                False,
-                f"every initial state of the support: gap <= {uni_how} (probability 1)",
-            )
-        )
+        forms.append(form_uniform(uni, uni_how))
     chosen = next(f for f in forms if f.name == use)
     ok = chosen.holds and not chosen.vacuous and math.isfinite(chosen.value)
     rho = chosen.value if ok else math.inf

@@ -256,6 +256,14 @@ def _theta_check(c: ClassConstants) -> list[Check]:
     ]
 
 
+def form_uniform(rho: float, how: str, remark: str = "") -> TasilForm:
+    """The sure form ``uniform`` (docs/math/tasil.md 3.8): ``gap <= rho`` for every initial state
+    of the support with probability one; ``how`` says which product gives ``rho``, ``remark`` is
+    appended inside the parenthesis."""
+    note = f"every initial state of the support: gap <= {how} (probability 1{remark})"
+    return TasilForm("uniform", rho, True, False, note)
+
+
 def form_held_out(
     h0v, h1v, tau0, tau1, gamma0, L, eta, R, delta, cont, comparison_gain=None
 ) -> TasilForm:

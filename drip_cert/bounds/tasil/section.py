@@ -20,7 +20,12 @@ from drip_cert.analysis.networks.policy_regularity import (
 )
 from drip_cert.bounds.tasil._common import up_closed_form
 from drip_cert.bounds.tasil.certificate import TasilCertificate, tasil_certificate
-from drip_cert.bounds.tasil.forms import FORMS, TasilForm, form_held_out_comparison
+from drip_cert.bounds.tasil.forms import (
+    FORMS,
+    TasilForm,
+    form_held_out_comparison,
+    form_uniform,
+)
 from drip_cert.bounds.tasil.trajectory import TrajectoryH, h0_lipschitz, h_continuous
 from drip_cert.bounds.tasil.tube import TubeBound
 from drip_cert.learn.data import Demonstrations
@@ -358,14 +363,10 @@ def _not_lipschitz(
         uni = up_closed_form(cg * u)
         if math.isfinite(uni):
             forms.append(
-                TasilForm(
-                    "uniform",
+                form_uniform(
                     uni,
-                    True,
-                    False,
-                    f"every initial state of the support: gap <= sup||g||_2/lambda_IL * "
-                    f"sup_S ||pi_IL - pi*|| = {cg:.6g} * {u:.6g} (probability 1; needs no "
-                    "Lipschitz Jacobian)",
+                    f"sup||g||_2/lambda_IL * sup_S ||pi_IL - pi*|| = {cg:.6g} * {u:.6g}",
+                    "; needs no Lipschitz Jacobian",
                 )
             )
             if uni < rho:
