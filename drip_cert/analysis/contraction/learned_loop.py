@@ -145,6 +145,22 @@ def _block_lipschitz(s: System, name: str) -> Quantity | None:
 LipMemo = dict[str, Quantity | None]
 
 
+def _affine_and_block_sum(
+    s: System, expr: sp.ImmutableMatrix, memo: LipMemo | None
+) -> tuple[AffineBlocks, float, list[Quantity]] | None:
+    """``expr = A x + c + sum_k C_k h_k(x)`` and ``sum_k ||C_k||_2 Lip(h_k)`` (rounded up) with the
+    Lipschitz constants it used, or ``None`` when ``expr`` is not affine in MLP blocks of ``x`` or
+    a block has no finite constant (:func:`_blocks_sum`)."""
+    dec = affine_in_blocks(expr, s)
+    if dec is None:
+        return None
+    parts = _blocks_sum(s, dec, memo)
+    if parts is None:
+        return None
+    total, lips = parts
+    return dec, total, lips
+
+
 def _blocks_sum(
     s: System, dec: AffineBlocks, memo: LipMemo | None = None
 ) -> tuple[float, list[Quantity]] | None:
@@ -193,13 +209,10 @@ def lipschitz_rate(
     t0 = time.perf_counter()
     if which == "learned" and s.learned is None:
         return None
-    dec = affine_in_blocks(s.closed_loop(which), s)
-    if dec is None:
+    found = _affine_and_block_sum(s, s.closed_loop(which), memo)
+    if found is None:
         return None
-    parts = _blocks_sum(s, dec, memo)
-    if parts is None:
-        return None
-    total, lips = parts
+    dec, total, lips = found
     _, mu_hi = mu2_constant_bounds(dec.A)
     mu_a = Quantity.derive(
         "mu_2(A)",
@@ -274,13 +287,10 @@ def difference_jacobian_bound(s: System, memo: LipMemo | None = None) -> Quantit
     constant of the difference, docs/math/nonsmooth.md); ``None`` otherwise."""
     if s.learned is None:
         return None
-    dec = affine_in_blocks(sp.ImmutableMatrix(s.learned - s.expert), s)
-    if dec is None:
+    found = _affine_and_block_sum(s, sp.ImmutableMatrix(s.learned - s.expert), memo)
+    if found is None:
         return None
-    parts = _blocks_sum(s, dec, memo)
-    if parts is None:
-        return None
-    total, lips = parts
+    dec, total, lips = found
     return Quantity.derive(
         "sup||D(pi_IL - pi*)||",
         add_up(_norm_up(dec.A), total),
