@@ -120,6 +120,7 @@ def cmd_train(args: argparse.Namespace) -> int:
         progress=not args.json,
         certify=not args.no_certify,
         compare=not args.no_compare,
+        compare_all=args.compare,
         until_certified=args.until_certified,
         max_heldout_gap=args.max_heldout_gap,
     )
@@ -265,17 +266,29 @@ def build_parser() -> argparse.ArgumentParser:
         files=[("constants", IN, "constants file"), ("figure", FIGURE, "--figure file")],
     )
 
-    q = sub.add_parser("train", help="train an imitation policy (TaSIL or BC)")
+    q = sub.add_parser("train", help="train an imitation policy (TaSIL, BC, DAgger or DART)")
     q.add_argument("spec")
-    q.add_argument("--method", choices=["tasil", "bc"], default="tasil")
+    q.add_argument(
+        "--method",
+        type=_train_method,
+        default="tasil",
+        help="tasil | bc | dagger | dart (docs/baselines.md)",
+    )
     q.add_argument("--trajectories", type=_posint, default=20)
     q.add_argument("--seed", type=_nonneg_int, default=0)
     q.add_argument("--steps", type=_posint, default=None)
     q.add_argument("--out", required=True)
     q.add_argument("--json", action="store_true")
     q.add_argument("--no-certify", action="store_true", help="skip the certificate of the policy")
-    q.add_argument(
+    cmp = q.add_mutually_exclusive_group()
+    cmp.add_argument(
         "--no-compare", action="store_true", help="do not train the other method for comparison"
+    )
+    cmp.add_argument(
+        "--compare",
+        action="store_true",
+        help="train and certify TaSIL, BC, DAgger and DART on the same data and label budget, "
+        "side by side",
     )
     q.add_argument(
         "--until-certified",
@@ -419,6 +432,17 @@ def _add_simulation_options(q: argparse.ArgumentParser) -> None:
 def _backend(args: argparse.Namespace) -> Backend:
     """The :class:`~drip_cert.sim.backend.Backend` of ``--backend`` / ``--scheduler``."""
     return Backend(args.backend, args.scheduler)
+
+
+def _train_method(text: str) -> str:
+    # the registry lives with the settings; imported here, not at start-up (numpy)
+    from drip_cert.spec.settings import TRAIN_METHODS
+
+    if text not in TRAIN_METHODS:
+        raise argparse.ArgumentTypeError(
+            f"unknown method {text!r}; use one of {', '.join(TRAIN_METHODS)}"
+        )
+    return text
 
 
 def _nonneg_float(text: str) -> float:

@@ -662,6 +662,11 @@ def read_l1_design(r: TableReader) -> L1DesignValues:
 
 
 # ------------------------------------------------------------------------------ [tasil]
+TRAIN_METHODS = ("tasil", "bc", "dagger", "dart")
+"""Training methods of ``[tasil] method`` and ``drip-cert train --method``: the TaSIL and BC losses
+on expert demonstrations, and the interactive baselines DAgger and DART (BC loss on the data
+they collect, :mod:`drip_cert.learn.baselines`)."""
+
 HELDOUT_FROM_DELTA = -1
 """``TasilSettings.heldout`` default: derive the count from ``delta`` (:func:`heldout_default`)."""
 
@@ -670,7 +675,7 @@ HELDOUT_FROM_DELTA = -1
 class TasilSettings:
     """``[tasil]``: training of the learned policy and the TaSIL certificate."""
 
-    method: str = "tasil"  #: "tasil" | "bc"
+    method: str = "tasil"  #: one of :data:`TRAIN_METHODS`
     order: int = 1  #: derivative order of the TaSIL loss (1 or 2)
     trajectories: int = 20  #: the paper's n
     #: fresh expert trajectories for the held-out form (3.3 c); 0: none; the default
@@ -729,7 +734,7 @@ class TasilSettings:
         r = TableReader("tasil", table, cls.KEYS, path)
         d = _defaults(cls)
         return cls(
-            method=r.get("method", one_of, d["method"], ("tasil", "bc")),
+            method=r.get("method", one_of, d["method"], TRAIN_METHODS),
             order=r.get("order", one_of, d["order"], (1, 2)),
             trajectories=r.get("trajectories", positive_int, d["trajectories"]),
             heldout=r.get("heldout", nonneg_int, d["heldout"]),
