@@ -408,7 +408,9 @@ def method_rows(run: PipelineResult, *, certify: bool = True) -> dict[str, dict[
     the verdict and ``rho`` of its certificate. Every method is certified on the same expert
     demonstrations (``run.demonstrations``: the training set's thresholds and the held-out set
     that no method trained on), so the verdicts differ only by the policy."""
-    from drip_cert.bounds.certificate import certify as _certify  # scipy: off the start-up path
+    from drip_cert.bounds.certificate import (  # scipy.optimize: keep off the CLI start-up path
+        certify as _certify,
+    )
 
     rows: dict[str, dict[str, Any]] = {}
     first = next(iter(run.trained), None)

@@ -6,6 +6,7 @@ determinism of the trained policies, and the ``train --method`` / ``--compare`` 
 from __future__ import annotations
 
 import dataclasses
+import json
 
 import numpy as np
 import pytest
@@ -220,3 +221,29 @@ def test_train_method_errors_exit_2(tmp_path, capsys, argv):
     err = capsys.readouterr().err
     assert "Traceback" not in err
     assert ("use one of tasil, bc, dagger, dart" in err) or ("not allowed with" in err)
+
+
+@pytest.mark.slow
+def test_train_compare_reports_four_methods_deterministically(tmp_path, capsys):
+    text = two_state_spec() + "[tasil]\nhidden = [4]\nsamples = 10\nheldout = 5\n"
+    spec = write_spec(tmp_path, text)
+    outs = []
+    for run in ("a", "b"):
+        argv = ("train", str(spec), "--out", str(tmp_path / run), "--compare", "--json")
+        code, out, _ = run_cli(capsys, *argv, "--steps", "20", "--trajectories", "4")
+        assert code in (0, 1)
+        outs.append(json.loads(out)["comparison"])
+    rows = outs[0]
+    assert list(rows) == list(TRAIN_METHODS)
+    for r in rows.values():
+        assert r["labels"] == 4 * 10
+        assert r["verdict"] in ("certified", "conditional", "not_certified")
+        assert r["heldout_gap_mean"] is not None
+    assert outs[0] == outs[1]  # same seed, same rows
+    code, out, _ = run_cli(
+        capsys, "train", str(spec), "--out", str(tmp_path / "c"), "--compare",
+        "--steps", "20", "--trajectories", "4",
+    )  # fmt: skip
+    assert "methods on the same demonstrations and label budget" in out
+    for m in TRAIN_METHODS:
+        assert f"\n  {m} " in out

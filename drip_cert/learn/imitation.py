@@ -20,7 +20,12 @@ import sympy as sp
 
 from drip_cert._jax import jax, jnp
 from drip_cert.errors import SpecError
-from drip_cert.learn.baselines import BASELINES, DEFAULT_ITERATIONS, BaselineRun
+from drip_cert.learn.baselines import (
+    BASELINES,
+    DEFAULT_ITERATIONS,
+    BaselineRun,
+    train_baseline,
+)
 from drip_cert.learn.data import Demonstrations, generate_demonstrations
 from drip_cert.model.blocks import mlp_block
 from drip_cert.model.mlp import MLP
@@ -221,8 +226,6 @@ def train_on_system(
 
     baseline = None
     if method in BASELINES:
-        from drip_cert.learn.baselines import train_baseline  # jax: see above
-
         baseline = train_baseline(
             method,
             demos.train,
