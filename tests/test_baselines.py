@@ -247,3 +247,13 @@ def test_train_compare_reports_four_methods_deterministically(tmp_path, capsys):
     assert "methods on the same demonstrations and label budget" in out
     for m in TRAIN_METHODS:
         assert f"\n  {m} " in out
+
+
+def test_train_parser_accepts_every_method():
+    from drip_cert.cli import build_parser
+
+    for m in TRAIN_METHODS:
+        args = build_parser().parse_args(["train", "s.toml", "--out", "o", "--method", m])
+        assert args.method == m and not args.compare
+    args = build_parser().parse_args(["train", "s.toml", "--out", "o", "--compare"])
+    assert args.compare and not args.no_compare
