@@ -280,7 +280,9 @@ def train_from_spec(
 ) -> dict[str, Any]:
     """``drip-cert train``: demonstrations, training, held-out gap, certificate; writes ``out``.
 
-    Files: ``policy.npz``/``policy.json`` (the MLP), ``demonstrations.npz`` (training data),
+    Files: ``policy.npz``/``policy.json`` (the MLP), ``demonstrations.npz`` (the expert training
+    data the certificate uses; DAgger and DART also write ``baseline_data.npz``, the aggregate
+    they were trained on),
     ``train.json`` (settings, losses, timings, held-out gaps, the certificate's verdict and
     binding condition). Every file is written atomically. ``use_in_spec`` in ``train.json`` is the
     TOML that makes a spec certify this policy on these demonstrations (for a residual policy the
@@ -343,6 +345,8 @@ def train_from_spec(
     tp.mlp.save(out / "policy.npz")
     write_onnx(tp.mlp, out / "policy.onnx")  # the same network for PyTorch / ONNX Runtime / C++
     save_demonstrations(tp.train, out / "demonstrations.npz")
+    if tp.baseline is not None:  # DAgger / DART: the aggregate the policy was trained on
+        save_demonstrations(tp.baseline.data, out / "baseline_data.npz")
     failures = _training_failures(tp, gaps, spec, max_heldout_gap)
     binding = rounds[-1]["binding"]
     if until_certified and binding is not None and not binding["certified"]:

@@ -257,3 +257,20 @@ def test_train_parser_accepts_every_method():
         assert args.method == m and not args.compare
     args = build_parser().parse_args(["train", "s.toml", "--out", "o", "--compare"])
     assert args.compare and not args.no_compare
+
+
+def test_train_dagger_writes_the_aggregate_and_its_rounds(tmp_path, capsys):
+    spec = write_spec(tmp_path, two_state_spec() + "[tasil]\nhidden = [4]\nsamples = 10\n")
+    code, out, _ = run_cli(
+        capsys, "train", str(spec), "--out", str(tmp_path / "d"), "--method", "dagger",
+        "--no-certify", "--no-compare", "--steps", "8", "--trajectories", "4", "--json",
+    )  # fmt: skip
+    assert code in (0, 1)
+    summary = json.loads(out)
+    assert summary["method"] == "dagger" and summary["baseline"]["labels"] == 4 * 10
+    assert [r["source"] for r in summary["baseline"]["rounds"]] == ["expert"] + ["learner"] * 3
+    agg = Demonstrations.load(tmp_path / "d" / "baseline_data.npz")
+    expert_set = Demonstrations.load(tmp_path / "d" / "demonstrations.npz")
+    assert agg.n_traj == expert_set.n_traj == 4
+    np.testing.assert_array_equal(agg.states[0], expert_set.states[0])  # iteration 0
+    assert not np.array_equal(agg.states[1:], expert_set.states[1:])  # learner rollouts
