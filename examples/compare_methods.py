@@ -101,13 +101,14 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--steps", type=int, default=None, help="override [tasil] steps")
     ap.add_argument("--heldout", type=int, default=None, help="override [tasil] heldout")
     ap.add_argument("--force", action="store_true", help="recompute systems already in OUT")
+    ap.add_argument("--table-only", action="store_true", help="only rebuild OUT/table.md")
     args = ap.parse_args(argv)
     from drip_cert.numerics.atomic_io import atomic_write_json, atomic_write_text
 
     args.out.mkdir(parents=True, exist_ok=True)
     tfile = args.out / "timings.json"
     timings = json.loads(tfile.read_text()) if tfile.exists() else {}
-    for name in args.systems:
+    for name in [] if args.table_only else args.systems:
         path = args.out / f"{name}.json"
         if path.exists() and not args.force:
             continue
