@@ -107,16 +107,17 @@ def main(argv: list[str] | None = None) -> int:
 
     args.out.mkdir(parents=True, exist_ok=True)
     tfile = args.out / "timings.json"
-    timings = json.loads(tfile.read_text()) if tfile.exists() else {}
     for name in [] if args.table_only else args.systems:
         path = args.out / f"{name}.json"
         if path.exists() and not args.force:
             continue
         t0 = time.perf_counter()
         atomic_write_json(path, run_one(name, args.seed, args.steps, args.heldout))
-        timings[name] = time.perf_counter() - t0
-        atomic_write_json(tfile, timings)
-        print(f"{name}: {timings[name]:.0f} s", flush=True)
+        wall = time.perf_counter() - t0
+        # read at write time: several systems may run in parallel processes
+        timings = json.loads(tfile.read_text()) if tfile.exists() else {}
+        atomic_write_json(tfile, {**timings, name: wall})
+        print(f"{name}: {wall:.0f} s", flush=True)
     order = [*SYSTEMS, PAPER]
     files = sorted(
         (p for p in args.out.glob("*.json") if p.stem in order),
