@@ -136,6 +136,7 @@ def cmd_train(args: argparse.Namespace) -> int:
         progress=_progress(args),
         certify=not args.no_certify,
         compare=not args.no_compare,
+        compare_all=args.compare,
         until_certified=args.until_certified,
         max_heldout_gap=args.max_heldout_gap,
         write_spec=args.write_spec,
@@ -306,14 +307,14 @@ def build_parser() -> argparse.ArgumentParser:
         files=[("constants", IN, "constants file"), ("figure", FIGURE, "--figure file")],
     )
 
-    q = sub.add_parser("train", help="train an imitation policy (TaSIL or BC)")
+    q = sub.add_parser("train", help="train an imitation policy (TaSIL, BC, DAgger or DART)")
     q.add_argument("spec", help=SPEC_HELP)
     q.add_argument(
         "--method",
-        choices=["tasil", "bc"],
+        type=_train_method,
         default="tasil",
-        help="the loss: TaSIL (matches the policy's Jacobian too) or behaviour cloning "
-        "(default: %(default)s)",
+        help="tasil (matches the policy's Jacobian too), bc (behaviour cloning), dagger or dart "
+        "(docs/baselines.md) (default: %(default)s)",
     )
     q.add_argument(
         "--trajectories",
@@ -341,8 +342,15 @@ def build_parser() -> argparse.ArgumentParser:
     )
     q.add_argument("--json", action="store_true", help=JSON_HELP)
     q.add_argument("--no-certify", action="store_true", help="skip the certificate of the policy")
-    q.add_argument(
+    cmp = q.add_mutually_exclusive_group()
+    cmp.add_argument(
         "--no-compare", action="store_true", help="do not train the other method for comparison"
+    )
+    cmp.add_argument(
+        "--compare",
+        action="store_true",
+        help="train and certify TaSIL, BC, DAgger and DART on the same data and label budget, "
+        "side by side",
     )
     q.add_argument(
         "--until-certified",
@@ -546,6 +554,16 @@ def _number_type(
         return v
 
     return convert
+
+
+def _train_method(text: str) -> str:
+    from drip_cert.spec.settings import TRAIN_METHODS  # flint: keep off the CLI start-up path
+
+    if text not in TRAIN_METHODS:
+        raise argparse.ArgumentTypeError(
+            f"unknown method {text!r}; use one of {', '.join(TRAIN_METHODS)}"
+        )
+    return text
 
 
 _nonneg_float = _number_type(

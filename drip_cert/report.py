@@ -607,6 +607,28 @@ def reproduce_markdown(summary: dict[str, Any], cert: Any, runs: dict[str, Any])
     return "\n".join(lines) + "\n"
 
 
+def comparison_text(rows: dict[str, dict[str, Any]]) -> str:
+    """``train --compare``: one line per method, the held-out gap beside the certificate's
+    verdict (whole certificate and TaSIL part) and its ``rho_TaSIL`` and ``rho``."""
+
+    def num(v: Any) -> str:
+        return "-" if v is None else f"{v:.4g}"
+
+    head = (
+        f"  {'method':<7} {'gap mean':>10} {'gap max':>10} {'labels':>7} {'verdict':<14} "
+        f"{'TaSIL part':<14} {'rho_TaSIL':>10} {'rho':>10}"
+    )
+    lines = ["methods on the same demonstrations and label budget:", head]
+    for m, g in rows.items():
+        lines.append(
+            f"  {m:<7} {num(g.get('heldout_gap_mean')):>10} {num(g.get('heldout_gap_max')):>10} "
+            f"{g.get('labels', 0):>7} {str(g.get('verdict', '-')):<14} "
+            f"{str(g.get('tasil_verdict', '-')):<14} {num(g.get('rho_tasil')):>10} "
+            f"{num(g.get('rho')):>10}"
+        )
+    return "\n".join(lines)
+
+
 def train_text(summary: dict[str, Any], out: str) -> str:
     """The text ``drip-cert train`` prints: the policy, its held-out gap beside the other
     method's, and the certificate's verdict with its binding condition and margin."""
@@ -617,12 +639,16 @@ def train_text(summary: dict[str, Any], out: str) -> str:
         f"held-out gap mean {summary['heldout_gap_mean']:.4g}, max "
         f"{summary['heldout_gap_max']:.4g} (threshold {summary['heldout_gap_threshold']:.4g})",
     ]
-    for m, g in summary["comparison"].items():
-        if m != summary["method"]:
-            lines.append(
-                f"  {m} on the same data and budget: held-out gap mean "
-                f"{g['heldout_gap_mean']:.4g}, max {g['heldout_gap_max']:.4g}"
-            )
+    rows = summary["comparison"]
+    if any("verdict" in g for g in rows.values()):
+        lines.append(comparison_text(rows))
+    else:
+        for m, g in rows.items():
+            if m != summary["method"]:
+                lines.append(
+                    f"  {m} on the same data and budget: held-out gap mean "
+                    f"{g['heldout_gap_mean']:.4g}, max {g['heldout_gap_max']:.4g}"
+                )
     b = summary.get("certificate")
     if b is not None:
         lines.append(f"certificate: {b['verdict'].upper()}; binding condition: {b['text']}")

@@ -43,6 +43,7 @@ from drip_cert.report import (
 )
 from drip_cert.spec import load_spec
 from drip_cert.spec.load import Spec, SpecSource, as_spec
+from drip_cert.spec.settings import TRAIN_METHODS
 from drip_cert.spec.write import read_document, spec_with_policy, toml_document
 
 if TYPE_CHECKING:
@@ -129,7 +130,8 @@ def run_pipeline(
         ``None``: train when the spec has no learned policy; ``True``: always (the trained policy
         replaces the spec's); ``False``: never.
     methods
-        Training methods (``"tasil"``, ``"bc"``) trained on the same demonstrations; the first is
+        Training methods (:data:`~drip_cert.spec.settings.TRAIN_METHODS`) trained on the same
+        demonstrations and label budget; the first is
         the policy certified and simulated (default: the spec's ``[tasil] method``).
     tasil
         Overrides of ``[tasil]`` settings for this run (e.g. ``steps``, ``trajectories``).
@@ -276,6 +278,7 @@ def train_from_spec(
     until_certified: int = 0,
     max_heldout_gap: float | None = None,
     write_spec: str | Path | None = None,
+    compare_all: bool = False,
 ) -> dict[str, Any]:
     """``drip-cert train``: demonstrations, training, held-out gap, certificate; writes ``out``.
 
@@ -283,21 +286,26 @@ def train_from_spec(
     ``[policy] learned``, the ``[tasil]`` demonstrations; relative paths re-based on its
     directory), a file that ``check-spec`` accepts and ``certify`` certifies as it is.
 
-    Files: ``policy.npz``/``policy.json`` (the MLP), ``demonstrations.npz`` (training data),
+    Files: ``policy.npz``/``policy.json`` (the MLP), ``demonstrations.npz`` (the expert training
+    data the certificate uses; DAgger and DART also write ``baseline_data.npz``, the aggregate
+    they were trained on),
     ``train.json`` (settings, losses, timings, held-out gaps, the certificate's verdict and
     binding condition). Every file is written atomically. ``use_in_spec`` in ``train.json`` is the
     TOML that makes a spec certify this policy on these demonstrations (for a residual policy the
     learned expressions carry the structure and the learned ``K``).
 
     ``compare``: train the other method (BC for TaSIL and vice versa) on the same demonstrations
-    and budget and report both held-out gaps. ``until_certified = R > 0``: when the certificate
-    is not certified and its binding condition is one training can change (the TaSIL bound, the
-    learned loop's contraction, the L1-DRAC design), train again with twice the steps, at most
-    ``R`` rounds in all; other binding conditions (the expert's assumptions) stop at once with
-    the reason. ``summary["ok"]`` is ``False`` (exit 1) when training diverged, the held-out gap
-    exceeds the threshold (``max_heldout_gap``, else ``[tasil] max_heldout_gap``, else the size
-    of the held-out expert trajectories, :data:`GAP_THRESHOLD_NOTE`), or ``until_certified`` ended
-    without a certified verdict.
+    and budget and report both held-out gaps. ``compare_all`` (``train --compare``): train every
+    method of :data:`~drip_cert.spec.settings.TRAIN_METHODS` (TaSIL, BC, DAgger, DART) on the same
+    demonstrations and label budget, and certify each one (:func:`method_rows`): the summary's
+    ``comparison`` then holds each method's held-out gap, verdict and ``rho``.
+    ``until_certified = R > 0``: when the certificate is not certified and its binding condition is
+    one training can change (the TaSIL bound, the learned loop's contraction, the L1-DRAC design),
+    train again with twice the steps, at most ``R`` rounds in all; other binding conditions (the
+    expert's assumptions) stop at once with the reason. ``summary["ok"]`` is ``False`` (exit 1) when
+    training diverged, the held-out gap exceeds the threshold (``max_heldout_gap``, else ``[tasil]
+    max_heldout_gap``, else the size of the held-out expert trajectories,
+    :data:`GAP_THRESHOLD_NOTE`), or ``until_certified`` ended without a certified verdict.
     """
     from drip_cert.learn.data import save_demonstrations  # jax: keep off the CLI start-up path
 
@@ -307,8 +315,12 @@ def train_from_spec(
     spec = load_spec(spec_path)
     if write_spec is not None and spec.path is None:
         raise SpecError("write_spec needs the spec as a file (it is copied with the policy)")
-    other = "bc" if method == "tasil" else "tasil"
-    methods = (method, other) if compare else (method,)
+    if compare_all:
+        methods: tuple[str, ...] = (method, *(m for m in TRAIN_METHODS if m != method))
+    elif compare:
+        methods = (method, "bc" if method == "tasil" else "tasil")
+    else:
+        methods = (method,)
     steps0 = steps or spec.settings.tasil.steps
     rounds: list[dict[str, Any]] = []
     run = None
@@ -343,6 +355,8 @@ def train_from_spec(
     tp.mlp.save(out / "policy.npz")
     write_onnx(tp.mlp, out / "policy.onnx")  # the same network for PyTorch / ONNX Runtime / C++
     save_demonstrations(tp.train, out / "demonstrations.npz")
+    if tp.baseline is not None:  # DAgger / DART: the aggregate the policy was trained on
+        save_demonstrations(tp.baseline.data, out / "baseline_data.npz")
     failures = _training_failures(tp, gaps, spec, max_heldout_gap)
     binding = rounds[-1]["binding"]
     if until_certified and binding is not None and not binding["certified"]:
@@ -355,6 +369,14 @@ def train_from_spec(
     summary = {
         "method": method,
         "order": st.order if method == "tasil" else 0,
+        "baseline": (
+            None
+            if tp.baseline is None
+            else {
+                "labels": tp.baseline.labels,
+                "rounds": [r.as_dict() for r in tp.baseline.rounds],
+            }
+        ),
         "architecture": st.architecture,
         "trajectories": trajectories,
         "seed": seed,
@@ -367,10 +389,14 @@ def train_from_spec(
         "heldout_gap_max": float(np.max(gaps)) if gaps.size else math.nan,
         "heldout_gap_threshold": _gap_threshold(tp, spec, max_heldout_gap),
         "linear": None if tp.result.linear is None else np.asarray(tp.result.linear).tolist(),
-        "comparison": {
-            m: {"heldout_gap_mean": float(np.mean(g)), "heldout_gap_max": float(np.max(g))}
-            for m, g in run.heldout_gaps.items()
-        },
+        "comparison": (
+            method_rows(run, certify=certify)
+            if compare_all
+            else {
+                m: {"heldout_gap_mean": float(np.mean(g)), "heldout_gap_max": float(np.max(g))}
+                for m, g in run.heldout_gaps.items()
+            }
+        ),
         "certificate": binding,
         "rounds": rounds,
         "ok": not failures,
@@ -416,6 +442,44 @@ def train_from_spec(
         summary["spec"] = str(write_spec)
     atomic_write_json(out / "train.json", summary)
     return summary
+
+
+def method_rows(run: PipelineResult, *, certify: bool = True) -> dict[str, dict[str, Any]]:
+    """One row per trained method of ``run``: held-out gap (mean and max over the held-out
+    initial states of ``max_t ||x'_t - x*_t||``), expert labels used, and, with ``certify``,
+    the verdict and ``rho`` of its certificate. Every method is certified on the same expert
+    demonstrations (``run.demonstrations``: the training set's thresholds and the held-out set
+    that no method trained on), so the verdicts differ only by the policy."""
+    from drip_cert.bounds.certificate import (  # scipy.optimize: keep off the CLI start-up path
+        certify as _certify,
+    )
+
+    rows: dict[str, dict[str, Any]] = {}
+    first = next(iter(run.trained), None)
+    for m, tp in run.trained.items():
+        g = run.heldout_gaps.get(m, np.array([]))
+        labels = tp.baseline.labels if tp.baseline is not None else tp.train.n_traj * tp.train.k
+        row: dict[str, Any] = {
+            "heldout_gap_mean": _json_safe(float(np.mean(g))) if g.size else None,
+            "heldout_gap_max": _json_safe(float(np.max(g))) if g.size else None,
+            "labels": int(labels),
+        }
+        if certify:
+            cert = run.certificate if m == first else None
+            if cert is None:
+                cert = _certify(run.spec.with_system(tp.system), demonstrations=run.demonstrations)
+            b = _binding(cert)
+            parts = cert.part_verdicts()
+            row.update(
+                verdict=b["verdict"],
+                tasil_verdict=parts.get("tasil", {}).get("verdict"),
+                rho=_json_safe(cert.rho),
+                rho_tasil=b["rho_tasil"],
+                rho_l1=b["rho_l1"],
+                binding=b["text"],
+            )
+        rows[m] = row
+    return rows
 
 
 GAP_THRESHOLD_NOTE = (

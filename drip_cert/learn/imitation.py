@@ -4,8 +4,8 @@ learned system.
 * the ``[tasil]`` settings are :class:`~drip_cert.spec.settings.TasilSettings` (validated when
   the spec is loaded: ``spec.settings.tasil``; :func:`tasil_settings` reads a bare table);
 * :func:`demonstrations` draws expert trajectories of the nominal model (DRIP Definition
-  "Training Data"); :func:`train_on_system` trains TaSIL or BC on them and returns the policy as
-  an MLP block for ``System.with_learned`` (:func:`learned_system`).
+  "Training Data"); :func:`train_on_system` trains TaSIL, BC, DAgger or DART on them and returns
+  the policy as an MLP block for ``System.with_learned`` (:func:`learned_system`).
 """
 
 from __future__ import annotations
@@ -20,11 +20,17 @@ import sympy as sp
 
 from drip_cert._jax import jax, jnp
 from drip_cert.errors import SpecError
+from drip_cert.learn.baselines import (
+    BASELINES,
+    DEFAULT_ITERATIONS,
+    BaselineRun,
+    train_baseline,
+)
 from drip_cert.learn.data import Demonstrations, generate_demonstrations
 from drip_cert.model.blocks import mlp_block
 from drip_cert.model.mlp import MLP
 from drip_cert.model.system import System
-from drip_cert.spec.settings import TasilSettings
+from drip_cert.spec.settings import TRAIN_METHODS, TasilSettings
 
 POLICY_BLOCK = "pi_il"  #: block name of a trained policy inside the System
 
@@ -130,6 +136,8 @@ class TrainedPolicy:
     demonstrations: DemonstrationSet
     settings: TasilSettings
     method: str
+    #: DAgger / DART: the aggregated data and the iterations (``None`` for TaSIL and BC)
+    baseline: BaselineRun | None = None
 
     @property
     def train(self) -> Demonstrations:
@@ -147,8 +155,17 @@ def train_on_system(
     progress: bool = False,
     demonstrations: DemonstrationSet | None = None,
     structure: Sequence[sp.Expr] | None = None,
+    *,
+    iterations: int = DEFAULT_ITERATIONS,
+    noise_cov: np.ndarray | None = None,
 ) -> TrainedPolicy:
-    """Train TaSIL (or BC, ``method``) on expert demonstrations and attach the policy to ``s``.
+    """Train TaSIL, BC, DAgger or DART (``method``, :data:`TRAIN_METHODS`) on expert
+    demonstrations and attach the policy to ``s``.
+
+    DAgger and DART (:mod:`drip_cert.learn.baselines`) spend the label budget of the training
+    demonstrations (their ``n`` trajectories) over ``iterations`` rounds of data collection
+    (learner rollouts labelled by the expert; expert rollouts with the noise ``noise_cov``, fitted
+    to the learner's error when ``None``) and use the BC loss.
 
     ``demonstrations`` are drawn by :func:`demonstration_set` from ``settings`` when not given;
     training uses ``settings.seed`` for its own randomness (initialisation, batches).
@@ -165,38 +182,69 @@ def train_on_system(
     from drip_cert.learn.tasil import train_policy  # optax: keep off the API's import path
 
     method = method or settings.method
+    if method not in TRAIN_METHODS:
+        raise SpecError(
+            f"unknown training method {method!r}; use one of {', '.join(TRAIN_METHODS)}",
+            field="tasil.method",
+        )
     demos = demonstration_set(s, settings) if demonstrations is None else demonstrations
     residual = settings.architecture == "residual"
-    expert = s.numeric.expert
-    train_demos = demos.train
-    if residual:
-        base = structure_function(s, structure)
-        full_expert = expert
+    full_expert = s.numeric.expert
+    base = structure_function(s, structure) if residual else None
 
-        def expert(x):
-            return full_expert(x) - base(x)
+    def fit(data: Demonstrations, steps: int, loss: str):
+        """Train on ``data`` (actions: the whole expert's labels); the result and the whole
+        learned policy ``structure(x) + res.policy()(x)``."""
+        expert = full_expert
+        if base is not None:
 
-        st = train_demos.states
-        offset = np.asarray(jax.vmap(base)(st.reshape(-1, st.shape[-1]))).reshape(
-            *st.shape[:-1], s.m
+            def expert(x):
+                return full_expert(x) - base(x)
+
+            st = data.states
+            offset = np.asarray(jax.vmap(base)(st.reshape(-1, st.shape[-1]))).reshape(
+                *st.shape[:-1], s.m
+            )
+            data = dataclasses.replace(data, actions=data.actions - offset)
+        res = train_policy(
+            data,
+            expert,
+            method=loss,
+            order=settings.order,
+            hidden=settings.hidden,
+            activation=settings.activation,
+            seed=settings.seed,
+            steps=steps,
+            lr=settings.lr,
+            batch=settings.batch,
+            progress=progress,
+            skip=residual,
+            lipschitz_budget=settings.lipschitz_budget,
         )
-        train_demos = dataclasses.replace(train_demos, actions=train_demos.actions - offset)
-    res = train_policy(
-        train_demos,
-        expert,
-        method=method,
-        order=settings.order,
-        hidden=settings.hidden,
-        activation=settings.activation,
-        seed=settings.seed,
-        steps=settings.steps,
-        lr=settings.lr,
-        batch=settings.batch,
-        progress=progress,
-        skip=residual,
-        lipschitz_budget=settings.lipschitz_budget,
-    )
+        net = res.policy()
+        if base is None:
+            return res, net
+        known = base
+        return res, lambda x: known(x) + net(x)
+
+    baseline = None
+    if method in BASELINES:
+        baseline = train_baseline(
+            method,
+            demos.train,
+            nominal_field(s),
+            full_expert,
+            np.array(s.support),
+            lambda data, steps: fit(data, steps, "bc"),
+            settings.steps,
+            settings.seed,
+            iterations=iterations,
+            noise_cov=noise_cov,
+        )
+        res = baseline.result
+    else:
+        res, _ = fit(demos.train, settings.steps, method)
     system = learned_system(
         s, res.mlp, linear=res.linear, structure=structure if residual else None
     )
-    return TrainedPolicy(system, res.mlp, res, demos, settings, method)
+    return TrainedPolicy(system, res.mlp, res, demos, settings, method, baseline)

@@ -817,6 +817,11 @@ def read_l1_design(r: TableReader) -> L1DesignValues:
 
 
 # ------------------------------------------------------------------------------ [tasil]
+TRAIN_METHODS = ("tasil", "bc", "dagger", "dart")
+"""Training methods of ``[tasil] method`` and ``drip-cert train --method``: the TaSIL and BC losses
+on expert demonstrations, and the interactive baselines DAgger and DART (BC loss on the data
+they collect, :mod:`drip_cert.learn.baselines`)."""
+
 HELDOUT_FROM_DELTA = -1
 """``TasilSettings.heldout`` default: derive the count from ``delta`` (:func:`heldout_default`)."""
 
@@ -825,7 +830,7 @@ HELDOUT_FROM_DELTA = -1
 class TasilSettings:
     """``[tasil]``: training of the learned policy and the TaSIL certificate."""
 
-    method: str = setting("tasil", "the training loss", one_of, ("tasil", "bc"))
+    method: str = setting("tasil", "the training method (docs/baselines.md)", one_of, TRAIN_METHODS)
     order: int = setting(1, "derivative order of the TaSIL loss", one_of, (1, 2))
     trajectories: int = setting(20, "number n of expert demonstrations", positive_int)
     #: the default :data:`HELDOUT_FROM_DELTA` is replaced by the smallest count at which the
