@@ -74,7 +74,11 @@ BAD = [
     ("[tasil]\nsteps = false", "tasil.steps", ["steps = false", "positive integer"]),
     ("[tasil]\norder = 3", "tasil.order", ["order = 3", "one of 1, 2"]),
     ("[tasil]\norder = true", "tasil.order", ["order = true", "one of 1, 2"]),
-    ('[tasil]\nmethod = "dagr"', "tasil.method", ['method = "dagr"', '"tasil", "bc", "dagger", "dart"']),
+    (
+        '[tasil]\nmethod = "dagr"',
+        "tasil.method",
+        ['method = "dagr"', '"tasil", "bc", "dagger", "dart"'],
+    ),
     ('[tasil]\nactivation = "relu"', "tasil.activation", ['"relu"', '"tanh", "gelu"']),
     ("[tasil]\nhidden = [64, 0]", "tasil.hidden", ["hidden = [64, 0]", "positive integers"]),
     ("[tasil]\nhidden = []", "tasil.hidden", ["hidden = []"]),
