@@ -50,7 +50,7 @@ from drip_cert.validate.checks import (
     checks_from_result,
     overall_status,
 )
-from drip_cert.validate.run import ValidationReport, _thresholds
+from drip_cert.validate.run import ValidationReport, _thresholds, certified_rho_mean
 from drip_cert.vocabulary import GAPS, SCENARIOS
 
 __all__ = [
@@ -91,6 +91,7 @@ _CHECK_GAP = {
     "policy_radius": "policy",
     "policy_gap": "policy",
     "uncertainty_gap": "uncertainty_l1",
+    "uncertainty_gap_rho_mean": "uncertainty_l1",
     "tail_frequency": "uncertainty_l1",
     "total_tail": "total_l1",
     "total_gap": "total_l1",
@@ -909,6 +910,7 @@ def validate_data(
         delta_l1=delta_l1,
         at_certified_l1=at_cert,
         not_certified_why=why,
+        rho_mean=certified_rho_mean(cert),
     )
     checks = [_not_in_data(c, data) if _gap_of_check(c.name) in missing else c for c in checks]
     notes.append(

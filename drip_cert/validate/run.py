@@ -44,7 +44,13 @@ from drip_cert.validate.scenarios import (
     run_scenarios,
 )
 
-__all__ = ["VALIDATION_SCHEMA_VERSION", "ShortHorizonRun", "ValidationReport", "validate"]
+__all__ = [
+    "VALIDATION_SCHEMA_VERSION",
+    "ShortHorizonRun",
+    "ValidationReport",
+    "certified_rho_mean",
+    "validate",
+]
 
 VALIDATION_SCHEMA_VERSION = 2
 """2: the embedded certificate in layout 4; wall-clock fields under ``timings``."""
@@ -312,6 +318,7 @@ def validate(
         at_certified_l1=at_cert and with_l1,
         not_certified_why=why,
         with_l1=with_l1,
+        rho_mean=certified_rho_mean(cert),
     )
     if T < s.horizon:
         cause = (
@@ -351,6 +358,7 @@ def validate(
                 kappa=kappa,
                 delta_l1=delta_l1,
                 policy=False,
+                rho_mean=certified_rho_mean(cert),
             )
             short = ShortHorizonRun(
                 horizon=t_short,
@@ -411,6 +419,27 @@ def validate(
         notes=tuple(notes),
         result=res,
     )
+
+
+def certified_rho_mean(cert: Any) -> float | None:
+    """The certificate's bound of the mean gap, ``max_t E||X_t - X*_t|| < rho_mean``, in the
+    user's ``x``.
+
+    ``rho_mean = min_{q <= p} rho(q)`` at the certified controller (docs/math/l1drac.md 5.6.1,
+    JSON ``l1drac.decomposition.rho_mean.value``); for a certificate in ``z = Theta x`` it is
+    mapped back like ``rho_L1`` (``E||Theta^{-1} Z|| <= ||Theta^{-1}||_2 E||Z||``). ``None``
+    without a feasible design or a decomposition.
+    """
+    l1 = getattr(cert, "l1", None)
+    if l1 is None or not l1.feasible:
+        return None
+    dec = getattr(l1, "decomposition", None)
+    mean = None if dec is None else dec.rho_mean
+    if mean is None:
+        return None
+    coords = getattr(cert, "coordinates", None)
+    v = float(mean.value)
+    return v if coords is None else float(coords.gap_in_x(v))
 
 
 def _thresholds(kappa: float | None, rho_tasil: float | None) -> tuple[float, ...]:
