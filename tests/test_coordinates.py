@@ -226,8 +226,8 @@ def test_natural_coordinate_examples_are_certified_through_the_metric(name):
     assert cert.verdict.value == "certified", cert.verdict_reasons
     alts = cert.alternatives
     assert [a["verdict"] for a in alts if a["coordinates"] == "x"] == ["not_certified"]
-    # every part certified, the L1-DRAC design at a simulable sampling period (omega, rho_a
-    # fixed in the spec for that purpose)
+    # every part certified, the L1-DRAC design at the simulable sampling period the spec gives
+    # (Ts, objective "rho_at_Ts"; omega, lambda_s and the radii found by the designer)
     assert {k: v["verdict"] for k, v in cert.part_verdicts().items()} == {
         "contraction": "certified",
         "tasil": "certified",
@@ -244,8 +244,8 @@ def test_natural_coordinate_examples_are_certified_through_the_metric(name):
 
 
 SIMULABLE_TS = 1e-3
-"""The examples fix omega = 50 and rho_a = 8 so that the certified T_s is at least a millisecond
-(measured 1.8e-3 to 9.5e-3 s): `validate` then simulates at the certified parameters."""
+"""The examples give T_s = 1.81e-3 to 9.19e-3 s (the designer finds omega, lambda_s and the radii
+for the smallest rho_L1 there): `validate` then simulates at the certified parameters."""
 
 
 def test_fewer_failing_checks_win_when_no_coordinates_certify(tmp_path):
