@@ -356,3 +356,78 @@ def test_every_check_reports_its_ratio_at_confidence():
         confidence_high=None, level=0.95, status="holds", reason=None, note="",
     )  # fmt: skip
     assert none.to_dict()["ratio_at_confidence"] is None
+
+
+# ------------------------------------------------------------------- the mean bound (5.6.1)
+
+
+def test_mean_gap_is_checked_against_rho_mean_like_with_like():
+    """Issue 25: max_t E||X_t - x'_t|| against rho_mean = min_q rho(q) (docs/math/l1drac.md
+    5.6.1), beside the L_2p check against rho_L1(p): same statistic as uncertainty_gap, the
+    smaller bound, its own ratio; a rho_mean below the mean's lower confidence bound is
+    violated while rho_L1 still holds."""
+    unc = _small(1, 0.05)  # E r_t = 0.05 at every t > 0
+    res = _result(_small(0, 0.05), unc, _small(2, 0.1))
+    rho_mean = 0.2  # < RHO_L1 = 0.5, as min_q rho(q) <= rho(p)
+    checks = by_name(checks_from_result(res, **_certified(rho_mean=rho_mean)))
+    mean, gap = checks["uncertainty_gap_rho_mean"], checks["uncertainty_gap"]
+    assert mean.kind == "expectation" and mean.status == HOLDS
+    assert mean.bound == rho_mean and gap.bound == RHO_L1
+    # the same statistic and confidence bounds, a different bound
+    assert mean.empirical == gap.empirical
+    assert (mean.confidence_low, mean.confidence_high) == (gap.confidence_low, gap.confidence_high)
+    assert mean.ratio == pytest.approx(rho_mean / gap.empirical, rel=FLOAT_ATOL)
+    assert mean.ratio_at_confidence == pytest.approx(rho_mean / gap.confidence_high, rel=FLOAT_ATOL)
+    assert checks["uncertainty_L2_norm"].status == HOLDS  # the L_2p check is kept
+    # a too-small bound: below the mean's one-sided lower confidence bound
+    small = 0.5 * gap.confidence_low
+    checks = by_name(checks_from_result(res, **_certified(rho_mean=small)))
+    assert checks["uncertainty_gap_rho_mean"].status == VIOLATED
+    assert checks["uncertainty_gap"].status == HOLDS  # rho_L1 itself is not violated
+    assert overall_status(list(checks.values())) == VIOLATED
+    # no rho_mean in the certificate: not checked, with the reason
+    c = by_name(checks_from_result(res, **_certified()))["uncertainty_gap_rho_mean"]
+    assert c.status == NOT_CHECKED and "no bound certified" in c.reason
+    # away from the certified parameters it never counts
+    c = by_name(
+        checks_from_result(
+            res, **_certified(rho_mean=small), at_certified_l1=False, not_certified_why="x"
+        )
+    )["uncertainty_gap_rho_mean"]
+    assert c.status == NOT_CHECKED and "not at certified parameters" in c.reason
+
+
+def test_certified_rho_mean_reads_the_decomposition_in_x():
+    """rho_mean (``Certificate.claims().rho_mean``) from ``l1drac.decomposition.rho_mean.value``,
+    mapped to x like rho_L1 (factor ||Theta^{-1}||_2, rounded up); None without a feasible design
+    or a decomposition."""
+    from drip_cert.bounds.certificate import Claims
+
+    design = SimpleNamespace(kappa=None, p=1, delta=None, omega=1.0, lambda_s=1.0, Ts=1e-3)
+
+    def stub(l1, coordinates=None):
+        return SimpleNamespace(
+            l1=l1,
+            coordinates=coordinates,
+            rho_tasil=None,
+            tasil=None,
+            rho_l1=None,
+            rho_sde=None,
+            rho=None,
+        )
+
+    def l1_with(decomposition, feasible=True):
+        return SimpleNamespace(feasible=feasible, design=design, decomposition=decomposition)
+
+    mean = SimpleNamespace(value=0.25)
+    l1 = l1_with(SimpleNamespace(rho_mean=mean))
+    assert Claims.of(stub(l1)).rho_mean == 0.25
+    coords = SimpleNamespace(gap_in_x=lambda v: 3.0 * v)
+    assert Claims.of(stub(l1, coords)).rho_mean == 0.75
+    for cert in (
+        stub(None),
+        stub(l1_with(SimpleNamespace(rho_mean=mean), feasible=False)),
+        stub(l1_with(None)),
+        stub(l1_with(SimpleNamespace(rho_mean=None))),
+    ):
+        assert Claims.of(cert).rho_mean is None

@@ -203,6 +203,11 @@ class Claims:
         ``sup_t ||X*_t - x'_t||_{L_2p}`` with a known diffusion, else ``None``.
     rho
         ``rho_TaSIL + rho_L1 (+ rho_sde)`` (DRIP eq. TotalTIG), ``None`` unless both parts exist.
+    rho_mean
+        ``max_t E||X_t - x'_t|| < rho_mean = min_{q <= p} rho(q)`` at the certified controller
+        (docs/math/l1drac.md 5.6.1; ``l1drac.decomposition.rho_mean``), in ``x``
+        (``E||Theta^{-1} Z|| <= F E||Z||``); ``None`` without a feasible design or a
+        decomposition.
     """
 
     rho_tasil: float | None
@@ -214,6 +219,7 @@ class Claims:
     design: tuple[float, float, float] | None
     rho_sde: float | None
     rho: float | None
+    rho_mean: float | None = None
 
     @classmethod
     def of(cls, cert: Any) -> Claims:
@@ -224,6 +230,10 @@ class Claims:
         kappa = design.kappa if design is not None else None
         if kappa is not None and coords is not None:
             kappa = coords.gap_in_x(kappa)  # P(||x gap|| >= F kappa) <= P(||z gap|| >= kappa)
+        dec = getattr(l1, "decomposition", None) if design is not None else None
+        mean = None if dec is None or dec.rho_mean is None else float(dec.rho_mean.value)
+        if mean is not None and coords is not None:
+            mean = float(coords.gap_in_x(mean))
         return cls(
             rho_tasil=cert.rho_tasil,
             delta_tasil=cert.tasil.delta if cert.tasil is not None else None,
@@ -236,6 +246,7 @@ class Claims:
             else (float(design.omega), float(design.lambda_s), float(design.Ts)),
             rho_sde=cert.rho_sde,
             rho=cert.rho,
+            rho_mean=mean,
         )
 
 

@@ -12,6 +12,10 @@
 * ``rho_L1(p)`` bounds ``||X_t - x'_t||_{L_2p}`` at every ``t`` (L1-DRAC Theorem 4.1): the
   one-sided lower t bound of ``E||X_t - x'_t||^{2p}``, raised to ``1/(2p)``
   (``uncertainty_L{2p}_norm``), and of the mean, since ``E|.| <= L_2p`` (``uncertainty_gap``);
+* ``rho_mean = min_{q <= p} rho(q)`` (docs/math/l1drac.md 5.6.1: every order's radius at the
+  certified controller, Jensen) bounds the mean ``max_t E||X_t - x'_t||`` itself: the same
+  one-sided t bound of the mean against it (``uncertainty_gap_rho_mean``), the like-with-like
+  tightness of the mean statistic;
 * ``P(||X_t - x'_t|| >= kappa) <= delta_L1`` at every ``t`` (L1-DRAC (130a)), with the
   Clopper-Pearson lower bound (``tail_frequency``);
 * the total: ``rho = rho_TaSIL + rho_L1`` adds a radius to a moment bound, so
@@ -619,6 +623,21 @@ def uncertainty_gap_name(res: Any, with_l1: bool = True) -> str:
     return base + "_sde" if base + "_sde" in names else base
 
 
+def claim_arguments(claims: Any) -> dict[str, Any]:
+    """The keyword arguments of :func:`checks_from_result` that a certificate's
+    :class:`~drip_cert.bounds.certificate.Claims` give (the same for ``validate`` and
+    ``validate --data``)."""
+    return {
+        "rho_tasil": claims.rho_tasil,
+        "delta_tasil": claims.delta_tasil,
+        "rho_l1": claims.rho_l1,
+        "p": claims.p,
+        "kappa": claims.kappa,
+        "delta_l1": claims.delta_l1,
+        "rho_mean": claims.rho_mean,
+    }
+
+
 def checks_from_result(
     res: Any,
     *,
@@ -632,6 +651,7 @@ def checks_from_result(
     not_certified_why: str = "",
     policy: bool = True,
     with_l1: bool = True,
+    rho_mean: float | None = None,
 ) -> list[EmpiricalCheck]:
     """The validation checks of one simulation result against the certified numbers.
 
@@ -654,13 +674,19 @@ def checks_from_result(
         Include the checks of the policy gap (off for the short-horizon run).
     with_l1
         Compare the L1-DRAC process (else the true process without L1, for information).
+    rho_mean
+        ``rho_mean = min_{q <= p} rho(q)`` at the certified controller: ``max_t E||X_t -
+        x'_t|| < rho_mean`` (docs/math/l1drac.md 5.6.1; the certificate's
+        ``l1drac.decomposition.rho_mean``, in the same coordinates as ``rho_l1``); ``None``
+        when the certificate has none (the check is then ``not_checked``).
 
     Returns
     -------
     list of dict
         See :func:`_make` for the keys. Checks: ``policy_radius`` (checked), ``policy_gap``
-        (information), ``uncertainty_gap``, ``uncertainty_L{2p}_norm``, ``tail_frequency``,
-        ``total_tail`` (checked) and ``total_gap`` (information).
+        (information), ``uncertainty_gap``, ``uncertainty_gap_rho_mean``,
+        ``uncertainty_L{2p}_norm``, ``tail_frequency``, ``total_tail`` (checked) and
+        ``total_gap`` (information).
     """
     level = float(res.config.ci_level)
     n_total = int(res.n_paths_done)
@@ -709,6 +735,21 @@ def checks_from_result(
             rho_l1,
             level,
             what=f"max_t E||X_t - {xn}|| vs rho_L1(p) (E|.| <= L_2p norm)",
+            **common,
+        )
+    )
+    l1_checks.append(
+        check_mean(
+            "uncertainty_gap_rho_mean",
+            unc.power_sums[0],
+            unc.power_sums[1],
+            unc.n,
+            rho_mean,
+            level,
+            what=f"max_t E||X_t - {xn}|| vs rho_mean = min_(q <= p) rho(q) (the mean bound)",
+            note="rho(q): the verified radius of order q at the certified omega, lambda_s, T_s; "
+            "E||Z|| <= ||Z||_L2q (Jensen) for each, so the smallest bounds the mean "
+            "(docs/math/l1drac.md 5.6.1)",
             **common,
         )
     )

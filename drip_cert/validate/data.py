@@ -48,6 +48,7 @@ from drip_cert.validate.checks import (
     NOTHING_CHECKED,
     EmpiricalCheck,
     checks_from_result,
+    claim_arguments,
     overall_status,
 )
 from drip_cert.validate.run import ValidationReport, _thresholds
@@ -91,6 +92,7 @@ _CHECK_GAP = {
     "policy_radius": "policy",
     "policy_gap": "policy",
     "uncertainty_gap": "uncertainty_l1",
+    "uncertainty_gap_rho_mean": "uncertainty_l1",
     "tail_frequency": "uncertainty_l1",
     "total_tail": "total_l1",
     "total_gap": "total_l1",
@@ -825,7 +827,7 @@ def validate_data(
     T_end = float(data.times[-1])
     # the certified numbers in the user's x (Certificate.claims: validate reads the same)
     c = cert.claims()
-    rho_tasil, delta_tasil, rho_l1 = c.rho_tasil, c.delta_tasil, c.rho_l1
+    rho_tasil, delta_tasil = c.rho_tasil, c.delta_tasil
     p, kappa, delta_l1 = c.p, c.kappa, c.delta_l1
     notes: list[str] = [] if warning is None else ["WARNING: " + warning]
     at_cert = c.design is not None
@@ -894,12 +896,7 @@ def validate_data(
     )
     checks = checks_from_result(
         res,
-        rho_tasil=rho_tasil,
-        delta_tasil=delta_tasil,
-        rho_l1=rho_l1,
-        p=p,
-        kappa=kappa,
-        delta_l1=delta_l1,
+        **claim_arguments(c),
         at_certified_l1=at_cert,
         not_certified_why=why,
     )

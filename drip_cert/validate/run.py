@@ -32,6 +32,7 @@ from drip_cert.validate.checks import (
     EmpiricalCheck,
     GapEvidence,
     checks_from_result,
+    claim_arguments,
     overall_status,
     uncertainty_gap_name,
 )
@@ -49,7 +50,12 @@ if TYPE_CHECKING:
     from drip_cert.bounds.certificate import Certificate
     from drip_cert.sim.result import SimResult
 
-__all__ = ["VALIDATION_SCHEMA_VERSION", "ShortHorizonRun", "ValidationReport", "validate"]
+__all__ = [
+    "VALIDATION_SCHEMA_VERSION",
+    "ShortHorizonRun",
+    "ValidationReport",
+    "validate",
+]
 
 VALIDATION_SCHEMA_VERSION = 2
 """2: the embedded certificate in layout 4; wall-clock fields under ``timings``."""
@@ -270,8 +276,6 @@ def validate(
             )
     # the bounds in the user's x (mapped back when the certificate is in z): the gaps are too
     c = cert.claims()
-    rho_tasil, delta_tasil, rho_l1 = c.rho_tasil, c.delta_tasil, c.rho_l1
-    p, kappa, delta_l1 = c.p, c.kappa, c.delta_l1
     why = "no feasible L1-DRAC design" if design is None else "practical T_s, see the notes"
     with_l1 = not s.g_depends_on_x
     if not with_l1:
@@ -284,7 +288,7 @@ def validate(
             "not_checked and the uncertainty gaps shown are those of the true process without "
             "L1-DRAC (for information)"
         )
-    kappas = _thresholds(kappa, rho_tasil)
+    kappas = _thresholds(c.kappa, c.rho_tasil)
     record_every = max(1, int(round(T / dt)) // 200)
     while int(round(T / dt)) % record_every:
         record_every -= 1
@@ -298,7 +302,7 @@ def validate(
         chunk_size=sim.chunk_size,
         record_every=record_every,
         kappas=kappas,
-        p_max=max(4, 2 * p),  # E r^{4p} gives the variance of r^{2p} for the L_2p check
+        p_max=max(4, 2 * c.p),  # E r^{4p} gives the variance of r^{2p} for the L_2p check
         w2_times=(T,),
         run_dir=run_dir,
         progress=progress,
@@ -321,12 +325,7 @@ def validate(
         notes.append(effect.note())
     checks = checks_from_result(
         res,
-        rho_tasil=rho_tasil,
-        delta_tasil=delta_tasil,
-        rho_l1=rho_l1,
-        p=p,
-        kappa=kappa,
-        delta_l1=delta_l1,
+        **claim_arguments(c),
         at_certified_l1=at_cert and with_l1,
         not_certified_why=why,
         with_l1=with_l1,
@@ -356,18 +355,13 @@ def validate(
                 chunk_size=SHORT_PATHS,
                 record_every=SHORT_STEPS // 100,
                 kappas=kappas,
-                p_max=max(4, 2 * p),
+                p_max=max(4, 2 * c.p),
                 x0_box=x0_box,
                 theta=theta,
             )
             short_checks = checks_from_result(
                 sres,
-                rho_tasil=rho_tasil,
-                delta_tasil=delta_tasil,
-                rho_l1=rho_l1,
-                p=p,
-                kappa=kappa,
-                delta_l1=delta_l1,
+                **claim_arguments(c),
                 policy=False,
             )
             short = ShortHorizonRun(
