@@ -254,6 +254,23 @@ def _make(
     )
 
 
+def _not_evaluated(
+    name: str, kind: str, what: str, *, bound: float | None, **rest: Any
+) -> EmpiricalCheck:
+    """A check whose statistic could not be computed (no data for it, no comparable bound): no
+    empirical value and no confidence bounds; ``rest`` carries ``level`` and the ``reason``."""
+    return _make(
+        name,
+        kind,
+        what,
+        bound=bound,
+        empirical=None,
+        confidence_low=None,
+        confidence_high=None,
+        **rest,
+    )
+
+
 def information(
     name: str, what: str, bound: float | None, empirical: float | None, why: str, **extra: Any
 ) -> EmpiricalCheck:
@@ -760,14 +777,11 @@ def checks_from_result(
     lp_what = f"max_t (E||X_t - {xn}||^{q})^(1/{q}) vs rho_L1(p)"
     if z1 is None:
         l1_checks.append(
-            _make(
+            _not_evaluated(
                 lp_name,
                 "moment",
                 lp_what,
                 bound=rho_l1,
-                empirical=None,
-                confidence_low=None,
-                confidence_high=None,
                 level=level,
                 reason=f"moment of order {q} not simulated",
             )
@@ -791,14 +805,11 @@ def checks_from_result(
     tail_what = f"max_t P(||X_t - {xn}|| >= kappa) vs delta_L1 (L1-DRAC (130a))"
     if j is None:
         l1_checks.append(
-            _make(
+            _not_evaluated(
                 "tail_frequency",
                 "tail",
                 tail_what,
                 bound=delta_l1,
-                empirical=None,
-                confidence_low=None,
-                confidence_high=None,
                 level=level,
                 reason=_bound_problem(kappa, "kappa") or "kappa was not simulated",
                 threshold=_num(kappa),
@@ -839,14 +850,11 @@ def checks_from_result(
         reason = "the threshold rho_TaSIL + kappa was not simulated"
     if reason is not None:
         l1_checks.append(
-            _make(
+            _not_evaluated(
                 "total_tail",
                 "tail",
                 total_what,
                 bound=dsum,
-                empirical=None,
-                confidence_low=None,
-                confidence_high=None,
                 level=level,
                 reason=reason,
                 threshold=thr,
