@@ -30,6 +30,7 @@ import numpy as np
 
 from drip_cert.errors import SpecError
 from drip_cert.figures_l1 import l1_front_figure
+from drip_cert.figures_training import training_figure
 from drip_cert.model.blocks import BlockFunction, block_applications
 from drip_cert.model.onnx_io import write_onnx
 from drip_cert.numerics.atomic_io import atomic_write_json, atomic_write_text, jsonable
@@ -289,6 +290,7 @@ def train_from_spec(
     Files: ``policy.npz``/``policy.json`` (the MLP), ``demonstrations.npz`` (the expert training
     data the certificate uses; DAgger and DART also write ``baseline_data.npz``, the aggregate
     they were trained on),
+    ``training.png`` (the losses, and every held-out gap against the threshold),
     ``train.json`` (settings, losses, timings, held-out gaps, the certificate's verdict and
     binding condition). Every file is written atomically. ``use_in_spec`` in ``train.json`` is the
     TOML that makes a spec certify this policy on these demonstrations (for a residual policy the
@@ -358,6 +360,16 @@ def train_from_spec(
     if tp.baseline is not None:  # DAgger / DART: the aggregate the policy was trained on
         save_demonstrations(tp.baseline.data, out / "baseline_data.npz")
     failures = _training_failures(tp, gaps, spec, max_heldout_gap)
+    figure = training_figure(
+        {
+            m: (h.steps, h.train_loss, h.val_loss, t.result.best_step)
+            for m, t in run.trained.items()
+            for h in (t.result.history,)
+        },
+        dict(run.heldout_gaps),
+        _gap_threshold(tp, spec, max_heldout_gap),
+        out / "training.png",
+    )
     binding = rounds[-1]["binding"]
     if until_certified and binding is not None and not binding["certified"]:
         failures.append(
@@ -403,6 +415,7 @@ def train_from_spec(
         "failures": failures,
         "policy": str(out / "policy.npz"),
         "policy_onnx": str(out / "policy.onnx"),
+        "figure": str(figure),
         "use_in_spec": (
             '[blocks.pi_il]\nkind = "mlp"\nweights = "policy.npz"\n'
             f"inputs = {s.n}\noutputs = {s.m}\n\n[policy]\nlearned = ["

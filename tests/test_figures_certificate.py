@@ -55,3 +55,15 @@ def test_figure_is_written_for_a_box_certificate(tmp_path):
     }
     out = certificate_figure(cert, tmp_path / "c.png")
     assert out.stat().st_size > 10_000  # a rendered two-panel png, not an empty file
+
+
+def test_training_figure_is_written_atomically(tmp_path):
+    """train's figure: losses per method and the held-out gaps against the threshold; the file
+    appears whole under its name (no partial file left beside it)."""
+    from drip_cert.figures_training import training_figure
+
+    hist = {"tasil": ((0, 10, 20), (1.0, 0.1, 0.01), (1.2, 0.2, 0.02), 20)}
+    gaps = {"tasil": np.array([0.01, 0.02, 0.015])}
+    out = training_figure(hist, gaps, 0.5, tmp_path / "training.png")
+    assert out.stat().st_size > 10_000
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["training.png"]

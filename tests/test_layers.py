@@ -43,6 +43,7 @@ LAYERS: dict[str, int] = {
     "deploy": 8,
     "report": 8,
     "figures_l1": 8,
+    "figures_training": 8,
     "figures_certificate": 8,
     "diff": 8,
     "cli": 9,

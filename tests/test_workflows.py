@@ -103,5 +103,6 @@ def test_train_command_writes_policy(tmp_path, capsys):
     assert code == 0
     summary = json.loads(stdout)
     assert (out / "policy.npz").is_file() and (out / "train.json").is_file()
+    assert summary["figure"] == str(out / "training.png") and (out / "training.png").is_file()
     assert summary["method"] == "bc" and summary["steps"] == 50
     assert not list(out.glob("*.tmp*"))
