@@ -59,6 +59,7 @@ SAME_LAYER_ALLOWED: set[tuple[str, str]] = {
     ("numerics", "_jax"),
     ("workflows", "report"),
     ("workflows", "figures_l1"),
+    ("workflows", "figures_training"),
 }
 
 
