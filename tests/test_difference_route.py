@@ -190,3 +190,29 @@ def test_trained_residual_policy_gets_its_tasil_part_certified(tmp_path):
     cert = summary["certificate"]
     assert cert["parts"]["tasil"] == "certified", cert["text"]
     assert cert["rho_tasil"] is not None and math.isfinite(cert["rho_tasil"])
+
+
+def test_a_box_limited_l_delta_must_hold_every_expert_trajectory(system):
+    """``L_Delta`` bounded on the box around the demonstrations says nothing about the expert
+    trajectory of a new initial state: without a proved set holding every expert trajectory the
+    section says so (``L_Delta_covers_support`` false, and certify marks the TaSIL scope
+    unjustified); with one, the box is enlarged to hold it plus the tube (it failed on 582b2f2:
+    the box was the demonstrations' only)."""
+    from drip_cert.bounds.tasil.section import tasil_section
+    from drip_cert.learn.imitation import demonstrations
+    from drip_cert.spec.settings import TasilSettings
+
+    s = system
+    st = TasilSettings(trajectories=4, heldout=8, samples=100, tube_radius=0.25)
+    train = demonstrations(s, st.trajectories, st.samples, seed=0)
+    held = demonstrations(s, st.heldout, st.samples, seed=0, stream=1)
+    gamma0 = Quantity("gamma0", 1.6, How.SOUND, "test", "a given delta-ISS gain")
+    _, prov, _ = tasil_section(s, train, held, gamma0, st, speed_sound=True)
+    assert prov["L_Delta_covers_support"] is False and "new initial state" in prov["L_Delta_cover"]
+    far = np.array([[-3.0, 3.0], [-3.0, 3.0]])  # a (given) set reaching beyond the data
+    _, prov, _ = tasil_section(
+        s, train, held, gamma0, st, speed_sound=True, expert_set=lambda: (far, "a test box")
+    )
+    assert prov["L_Delta_covers_support"] is True
+    box = np.array(prov["L_Delta_box"])
+    assert np.all(box[:, 0] <= far[:, 0] - 0.25) and np.all(box[:, 1] >= far[:, 1] + 0.25)

@@ -1027,6 +1027,7 @@ def _tasil_part(
         comparison_gain=cmp_gain,
         uniform_h0=uniform_h0,
         tube=tube,
+        expert_set=lambda: _expert_set(s, r, inv),
     )
     quantities = tuple(q for q in tq if q.name != "gamma0")
     ok = tasil.rho is not None and math.isfinite(tasil.rho)
@@ -1047,7 +1048,10 @@ def _tasil_part(
         rhs=math.inf,
         source="docs/math/tasil.md sections 3-4 (this project's construction)",
     )
-    checks = (tcheck.with_scope(*_tasil_scope(r, inv, tasil, s.horizon, k.g_box)),)
+    scope_ok, scope_why = _tasil_scope(r, inv, tasil, s.horizon, k.g_box)
+    if scope_ok and not tasil_prov.get("L_Delta_covers_support", True):
+        scope_ok, scope_why = False, str(tasil_prov["L_Delta_cover"])
+    checks = (tcheck.with_scope(scope_ok, scope_why),)
     return _TasilPart(tasil, tasil_prov, quantities, checks, (), tuple(notes))
 
 
@@ -1190,26 +1194,35 @@ def _learned_contraction(
     return analyse_contraction(s, "learned", opts)
 
 
-def _uniform_h0(
-    s: System, r: Any, inv: InvariantSet | None, notes: list[str]
-) -> tuple[Quantity | None, np.ndarray | None]:
-    """``sup_{x in S} ||pi_IL(x) - pi*(x)||`` (sound) over a box ``S`` proved to hold every
-    expert trajectory from the support on ``[0, T]``: the support itself when it is forward
-    invariant (Nagumo), else the box around a proved invariant ball; ``None`` when neither is
-    proved or the difference is not affine in MLP blocks. Also returns ``S``."""
+def _expert_set(s: System, r: Any, inv: InvariantSet | None) -> tuple[np.ndarray | None, str]:
+    """A box ``S`` proved to hold every expert trajectory from the support on ``[0, T]``: the
+    support itself when it is forward invariant (Nagumo; needs the expert's rate for all x),
+    else the box around a proved invariant ball; ``(None, why)`` when neither is proved."""
     support = np.asarray(s.support, dtype=float)
     enclose = block_enclose_callback(s.blocks) if s.blocks else None
-    S = None
     if r.holds and r.how.proved and r.scope.all_x and r.scope.covers_time(s.horizon):
         try:
             if invariant_box(s.closed_loop("expert"), s.states, s.t, support, s.horizon, enclose):
-                S, why = support, "the support (forward invariant for the expert, Nagumo)"
+                return support, "the support (forward invariant for the expert, Nagumo)"
         except DripCertError:
-            S = None
-    if S is None and inv is not None and inv.proved and inv.centre:
+            pass
+    if inv is not None and inv.proved and inv.centre:
         c = np.asarray(inv.centre, dtype=float)
-        S = np.stack([c - inv.radius, c + inv.radius], axis=1)
-        why = f"the box around the expert's invariant ball (radius {inv.radius:.4g})"
+        box = np.stack([c - inv.radius, c + inv.radius], axis=1)
+        return box, f"the box around the expert's invariant ball (radius {inv.radius:.4g})"
+    return None, (
+        "the support is not proved forward invariant and no invariant ball is proved"
+        + ("" if inv is None else f": {inv.reason}")
+    )
+
+
+def _uniform_h0(
+    s: System, r: Any, inv: InvariantSet | None, notes: list[str]
+) -> tuple[Quantity | None, np.ndarray | None]:
+    """``sup_{x in S} ||pi_IL(x) - pi*(x)||`` (sound) over the box ``S`` of :func:`_expert_set`;
+    ``None`` when no such set is proved or the difference is not affine in MLP blocks. Also
+    returns ``S``."""
+    S, why = _expert_set(s, r, inv)
     if S is None:
         return None, None
     q = sup_policy_difference(s, S)

@@ -7,6 +7,7 @@ project's construction, not TaSIL's own constant).
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -110,6 +111,41 @@ def h0_by_lipschitz(
     return h0, How.SOUND if sound else How.ESTIMATE
 
 
+def _l_delta(
+    s: System, box: np.ndarray
+) -> tuple[Quantity, Quantity, Quantity, Quantity | None, bool, Quantity]:
+    """``L_dpi(pi_IL)``, ``L_dpi(pi*)``, their triangle bound, the bound on the difference
+    itself (``None`` when it has none), whether the difference is used, and the ``L_Delta``
+    used, on ``box`` (docs/math/tasil.md 3.12)."""
+    L_il = jacobian_lipschitz(s, "learned", box)
+    L_ex = jacobian_lipschitz(s, "expert", box)
+    L_tri = Quantity.derive(
+        "L_Delta",
+        add_up(L_il.value, L_ex.value),
+        inputs=[L_il, L_ex],
+        source="DRIP Assumption PolicyRegularity (b)",
+        note="L_dpi(pi_IL) + L_dpi(pi*) (triangle inequality)",
+    )
+    # the difference itself: terms both policies share cancel; a sound bound on it is preferred
+    # to any triangle bound that rests on an estimate, and to a larger sound one
+    L_dir = difference_jacobian_lipschitz(s, box)
+    direct = L_dir is not None and (L_tri.how == How.ESTIMATE or L_dir.value < L_tri.value)
+    L_Delta = (
+        Quantity.derive(
+            "L_Delta",
+            L_dir.value,
+            inputs=[L_dir],
+            source="DRIP Assumption PolicyRegularity (b)",
+            note="Lipschitz constant of d(pi_IL - pi*) bounded on the difference itself ("
+            + L_dir.note
+            + f"); the triangle bound L_dpi(pi_IL) + L_dpi(pi*) is {L_tri.value:.6g}",
+        )
+        if L_dir is not None and direct
+        else L_tri
+    )
+    return L_il, L_ex, L_tri, L_dir, direct, L_Delta
+
+
 def tasil_section(
     s: System,
     train: Demonstrations,
@@ -123,6 +159,7 @@ def tasil_section(
     comparison_gain: Quantity | None = None,
     uniform_h0: Quantity | None = None,
     tube: TubeBound | None = None,
+    expert_set: Callable[[], tuple[np.ndarray | None, str]] | None = None,
 ) -> tuple[TasilCertificate, dict[str, Any], tuple[Quantity, ...]]:
     """The TaSIL certificate of ``s.learned`` (docs/math/tasil.md sections 3-4).
 
@@ -154,6 +191,14 @@ def tasil_section(
     tube
         With ``comparison_gain``: the time-resolved sure bound along the expert's tube
         (docs/math/tasil.md section 3.10); the form ``"uniform"`` takes the smaller.
+    expert_set
+        Called only when the ``L_Delta`` used holds on a box only: a box proved to hold every
+        expert trajectory from the support on ``[0, T]`` (with the reason), or ``(None, why)``.
+        The box of ``L_Delta`` is then enlarged to hold it plus the tube, so that the lemma's
+        tube around the expert trajectory of a *new* initial state stays where ``L_Delta``
+        holds; without such a set the provenance says ``L_Delta_covers_support = False`` and
+        the certificate marks the TaSIL scope unjustified (a box around the demonstrations says
+        nothing about new trajectories).
 
     Returns
     -------
@@ -173,32 +218,29 @@ def tasil_section(
         [d.states.reshape(-1, s.n) for d in (train, heldout) if d is not None], axis=0
     )
     box = np.stack([pts.min(axis=0) - margin, pts.max(axis=0) + margin], axis=1)
-    L_il = jacobian_lipschitz(s, "learned", box)
-    L_ex = jacobian_lipschitz(s, "expert", box)
-    L_tri = Quantity.derive(
-        "L_Delta",
-        add_up(L_il.value, L_ex.value),
-        inputs=[L_il, L_ex],
-        source="DRIP Assumption PolicyRegularity (b)",
-        note="L_dpi(pi_IL) + L_dpi(pi*) (triangle inequality)",
-    )
-    # the difference itself: terms both policies share cancel; a sound bound on it is preferred
-    # to any triangle bound that rests on an estimate, and to a larger sound one
-    L_dir = difference_jacobian_lipschitz(s, box)
-    direct = L_dir is not None and (L_tri.how == How.ESTIMATE or L_dir.value < L_tri.value)
-    L_Delta = (
-        Quantity.derive(
-            "L_Delta",
-            L_dir.value,
-            inputs=[L_dir],
-            source="DRIP Assumption PolicyRegularity (b)",
-            note="Lipschitz constant of d(pi_IL - pi*) bounded on the difference itself ("
-            + L_dir.note
-            + f"); the triangle bound L_dpi(pi_IL) + L_dpi(pi*) is {L_tri.value:.6g}",
-        )
-        if L_dir is not None and direct
-        else L_tri
-    )
+    L_il, L_ex, L_tri, L_dir, direct, L_Delta = _l_delta(s, box)
+    covers, cover_why = True, "L_Delta holds for all x"
+    if not L_Delta.scope.all_x:
+        S, why = expert_set() if expert_set is not None else (None, "no set was searched for")
+        if S is None:
+            covers = False
+            cover_why = (
+                "L_Delta is proved on the box around the demonstrations only, and no set "
+                f"holding every expert trajectory from the support is proved ({why}): the "
+                "bound says nothing about the trajectory of a new initial state"
+            )
+        else:
+            S = np.asarray(S, dtype=float)
+            need = np.stack([S[:, 0] - margin, S[:, 1] + margin], axis=1)
+            if np.any(need[:, 0] < box[:, 0]) or np.any(need[:, 1] > box[:, 1]):
+                box = np.stack(
+                    [np.minimum(box[:, 0], need[:, 0]), np.maximum(box[:, 1], need[:, 1])], axis=1
+                )
+                L_il, L_ex, L_tri, L_dir, direct, L_Delta = _l_delta(s, box)
+            cover_why = (
+                f"L_Delta is proved on a box holding {why}, enlarged by the tube radius "
+                f"{margin:.6g}: every expert trajectory from the support and its tube"
+            )
     R = settings.tube_radius
     if not L_Delta.scope.all_x:
         R = min(R, margin)
@@ -215,6 +257,9 @@ def tasil_section(
         "gamma0": gamma0.to_dict(),
         "tube_radius_R": R,
         "room": room,
+        "L_Delta_box": box.tolist(),
+        "L_Delta_covers_support": covers,
+        "L_Delta_cover": cover_why,
     }
     # the TaSIL check rests on the route used: the difference alone, or both policies' constants
     qs: list[Quantity] = [gamma0] + ([L_dir] if L_dir is not None and direct else [L_il, L_ex])
