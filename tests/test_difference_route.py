@@ -216,3 +216,17 @@ def test_a_box_limited_l_delta_must_hold_every_expert_trajectory(system):
     assert prov["L_Delta_covers_support"] is True
     box = np.array(prov["L_Delta_box"])
     assert np.all(box[:, 0] <= far[:, 0] - 0.25) and np.all(box[:, 1] >= far[:, 1] + 0.25)
+
+
+def test_corner_norm_is_an_upper_bound_checked_exactly():
+    """The radius of the equilibrium ball holding every expert trajectory: the largest corner
+    norm of the support, rounded up so that its square is at least the exact sum of squares."""
+    from fractions import Fraction
+
+    from drip_cert.bounds.certificate import _corner_norm_up
+
+    box = np.array([[-0.1, 0.3], [-0.7, 0.2], [0.0, 1e-3]])
+    rho = _corner_norm_up(box)
+    exact = Fraction(0.3) ** 2 + Fraction(-0.7) ** 2 + Fraction(1e-3) ** 2
+    assert Fraction(rho) ** 2 >= exact
+    assert Fraction(math.nextafter(rho, 0.0)) ** 2 < exact  # the smallest such float

@@ -15,9 +15,11 @@ import dataclasses
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from fractions import Fraction
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
+import sympy as sp
 
 from drip_cert.analysis.contraction.coordinates import CoordinateChange, coordinates_from_metric
 from drip_cert.analysis.contraction.invariance import (
@@ -1194,10 +1196,14 @@ def _learned_contraction(
     return analyse_contraction(s, "learned", opts)
 
 
-def _expert_set(s: System, r: Any, inv: InvariantSet | None) -> tuple[np.ndarray | None, str]:
+def _expert_set(
+    s: System, r: Any, inv: InvariantSet | None, equilibrium_ball: bool = True
+) -> tuple[np.ndarray | None, str]:
     """A box ``S`` proved to hold every expert trajectory from the support on ``[0, T]``: the
     support itself when it is forward invariant (Nagumo; needs the expert's rate for all x),
-    else the box around a proved invariant ball; ``(None, why)`` when neither is proved."""
+    else the box around a proved invariant ball, else (``equilibrium_ball``) the box around the
+    ball ``||x|| <= max_support ||x||`` when the rate holds for all x and ``x = 0`` is an
+    equilibrium of the expert loop; ``(None, why)`` when none is proved."""
     support = np.asarray(s.support, dtype=float)
     enclose = block_enclose_callback(s.blocks) if s.blocks else None
     if r.holds and r.how.proved and r.scope.all_x and r.scope.covers_time(s.horizon):
@@ -1210,10 +1216,35 @@ def _expert_set(s: System, r: Any, inv: InvariantSet | None) -> tuple[np.ndarray
         c = np.asarray(inv.centre, dtype=float)
         box = np.stack([c - inv.radius, c + inv.radius], axis=1)
         return box, f"the box around the expert's invariant ball (radius {inv.radius:.4g})"
+    global_rate = r.holds and r.how.proved and r.scope.all_x and r.scope.covers_time(s.horizon)
+    if equilibrium_ball and global_rate:
+        F = s.closed_loop("expert")
+        at_zero = F.subs({x: 0 for x in s.states})
+        if all(sp.simplify(e) == 0 for e in at_zero):
+            # x = 0 is a trajectory of the expert loop and the Euclidean rate holds for all x and
+            # t: ||x(t)|| <= e^{-lambda t} ||x(0)|| <= the largest corner norm of the support
+            rho = _corner_norm_up(support)
+            box = np.array([[-rho, rho]] * s.n)
+            return box, (
+                f"the ball ||x|| <= {rho:.4g} around the expert's equilibrium x = 0 (the "
+                "largest norm on the support; the rate holds for all x)"
+            )
     return None, (
         "the support is not proved forward invariant and no invariant ball is proved"
         + ("" if inv is None else f": {inv.reason}")
     )
+
+
+def _corner_norm_up(box: np.ndarray) -> float:
+    """An upper bound of ``max_{x in box} ||x||_2`` (the largest corner norm), checked exactly:
+    the float returned squared is at least the exact rational sum of squares."""
+    exact = sum(
+        max(Fraction(float(lo)) ** 2, Fraction(float(hi)) ** 2) for lo, hi in np.asarray(box)
+    )
+    rho = math.sqrt(float(exact))
+    while Fraction(rho) ** 2 < exact:
+        rho = math.nextafter(rho, math.inf)
+    return rho
 
 
 def _uniform_h0(
@@ -1222,7 +1253,9 @@ def _uniform_h0(
     """``sup_{x in S} ||pi_IL(x) - pi*(x)||`` (sound) over the box ``S`` of :func:`_expert_set`;
     ``None`` when no such set is proved or the difference is not affine in MLP blocks. Also
     returns ``S``."""
-    S, why = _expert_set(s, r, inv)
+    # the sure forms keep the sets of the previous stop (the equilibrium ball is used only to
+    # place L_Delta, where it costs nothing)
+    S, why = _expert_set(s, r, inv, equilibrium_ball=False)
     if S is None:
         return None, None
     q = sup_policy_difference(s, S)
