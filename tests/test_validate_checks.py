@@ -431,3 +431,14 @@ def test_certified_rho_mean_reads_the_decomposition_in_x():
         stub(l1_with(SimpleNamespace(rho_mean=None))),
     ):
         assert Claims.of(cert).rho_mean is None
+
+
+def test_record_stride_divides_the_steps_and_bounds_the_records():
+    """The recorded grid ends at T (the stride divides the steps), keeps about 200 records and
+    never more than 1000: 285720 steps (2^3 3 5 2381) gave 28572 records (3.5 GiB of states at
+    2000 paths, a SpecError) with the former "largest divisor below 200 records" search."""
+    from drip_cert.validate.run import RECORDS_MOST, record_stride
+
+    for n, want in ((285720, 2381), (10000, 50), (997, 1), (1, 1)):
+        d = record_stride(n)
+        assert n % d == 0 and n // d <= RECORDS_MOST and d == want, (n, d)
