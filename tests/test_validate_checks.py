@@ -34,6 +34,7 @@ from drip_cert.validate.checks import (
     check_tail,
     checks_from_result,
     overall_status,
+    total_tail_claim,
 )
 from tests.helpers import by_name, example_spec, run_cli
 
@@ -255,6 +256,67 @@ def test_total_uses_rho_tasil_plus_kappa_and_delta_sum():
     total[: N_PATHS // 2, 1:] = thr
     res = _result(_small(0, 0.05), _small(1, 0.05), total)
     assert by_name(checks_from_result(res, **_certified()))["total_tail"].status == VIOLATED
+
+
+RHO_SDE = 0.3
+"""``sup_t ||X*_t - x'_t||_{L_2p}`` of a synthetic certificate with a known diffusion."""
+
+ULPS_TOL = 1e-14
+"""The Markov radius is rounded up by a few ulps of numbers ~4: relative 1e-14 covers it."""
+
+
+def test_total_tail_with_a_known_diffusion_passes_through_the_nominal_sde():
+    # closed form: r = rho_sde delta_L1^(-1/(2p)) = 0.3 / sqrt(0.2); thr = rho_TaSIL + kappa + r
+    thr, dsum, why = total_tail_claim(RHO_TASIL, KAPPA, DELTA_TASIL, DELTA_L1, RHO_SDE, P)
+    exact = RHO_TASIL + KAPPA + RHO_SDE / math.sqrt(DELTA_L1)
+    assert why is None
+    assert exact <= thr <= exact * (1 + ULPS_TOL)
+    assert dsum == pytest.approx(DELTA_TASIL + 2 * DELTA_L1, abs=FLOAT_ATOL)
+    # without a known diffusion: the two-term claim, unchanged
+    thr0, dsum0, _ = total_tail_claim(RHO_TASIL, KAPPA, DELTA_TASIL, DELTA_L1, None, P)
+    assert (thr0, dsum0) == (RHO_TASIL + KAPPA, pytest.approx(DELTA_TASIL + DELTA_L1))
+    # p = 2: the 4th moment, r = rho_sde delta^(-1/4)
+    thr2, _, _ = total_tail_claim(RHO_TASIL, KAPPA, DELTA_TASIL, DELTA_L1, RHO_SDE, 2)
+    assert thr2 == pytest.approx(RHO_TASIL + KAPPA + RHO_SDE * DELTA_L1**-0.25, rel=ULPS_TOL)
+    # a vacuous rho_sde or a probability sum >= 1 forms no claim
+    assert total_tail_claim(RHO_TASIL, KAPPA, DELTA_TASIL, DELTA_L1, math.inf, P)[2]
+    assert total_tail_claim(RHO_TASIL, KAPPA, 0.3, 0.4, RHO_SDE, P)[2]
+
+
+def test_the_markov_radius_is_the_smallest_that_holds_for_every_law():
+    # Y = r w.p. delta, else 0: ||Y||_{L_2p} = r delta^(1/(2p)) = rho_sde and P(Y >= r) = delta
+    # exactly, so no smaller radius is valid for every law with that moment (Markov attained)
+    for p in (1, 2, 3):
+        thr, _, _ = total_tail_claim(0.0, KAPPA, DELTA_TASIL, DELTA_L1, RHO_SDE, p)
+        r = thr - KAPPA
+        r_tight = RHO_SDE * DELTA_L1 ** (-1.0 / (2 * p))
+        assert r == pytest.approx(r_tight, rel=ULPS_TOL) and r >= r_tight * (1 - ULPS_TOL)
+        moment = (DELTA_L1 * r_tight ** (2 * p)) ** (1.0 / (2 * p))
+        assert moment == pytest.approx(RHO_SDE, rel=ULPS_TOL)
+
+
+def test_total_tail_with_a_known_diffusion_checks_the_three_term_threshold():
+    thr, dsum, _ = total_tail_claim(RHO_TASIL, KAPPA, DELTA_TASIL, DELTA_L1, RHO_SDE, P)
+    assert thr is not None and dsum is not None
+    rng = np.random.default_rng(9)
+    # 40% of the paths between rho_TaSIL + kappa and the three-term threshold: the two-term
+    # claim (at 0.3) would be violated; the three-term claim (at 0.5) holds
+    total = _small(3, 0.1)
+    total[rng.permutation(N_PATHS)[: int(0.4 * N_PATHS)], 1:] = 0.5 * (RHO_TASIL + KAPPA + thr)
+    kappas = (KAPPA, RHO_TASIL + KAPPA, thr)
+    sums = accumulate(new_sums(N_TIMES, 4, kappas), total, np.ones(N_PATHS, dtype=bool))
+    res = _result(_small(0, 0.05), _small(1, 0.05), total)
+    res.gaps["total_l1"] = finalize("total_l1", sums, TIMES, LEVEL)
+    tot = by_name(checks_from_result(res, **_certified(rho_sde=RHO_SDE)))["total_tail"]
+    assert tot.extra["threshold"] == thr
+    assert tot.bound == pytest.approx(dsum, abs=FLOAT_ATOL)
+    assert tot.empirical == 0.0 and tot.status == HOLDS
+    two = by_name(checks_from_result(res, **_certified()))["total_tail"]
+    assert two.status == VIOLATED  # the same paths against the claim without rho_sde
+    # a run that simulated only the two-term threshold cannot check the three-term claim
+    plain = _result(_small(0, 0.05), _small(1, 0.05), total)
+    tot = by_name(checks_from_result(plain, **_certified(rho_sde=RHO_SDE)))["total_tail"]
+    assert tot.status == NOT_CHECKED
 
 
 def test_l2p_norm_uses_a_lower_confidence_bound():

@@ -183,7 +183,7 @@ def test_the_engine_own_trajectories_as_data_give_the_engine_checks_bit_for_bit(
     )
     n, dt, T = 40, 0.01, 1.0
     cert = _stub_certificate(rho_tasil=0.05, rho_l1=0.02, kappa=0.03, ts=2 * dt)
-    kappas = _thresholds(0.03, 0.05)
+    kappas = _thresholds(cert.claims())
     cfg = SimConfig(
         T=T,
         dt=dt,

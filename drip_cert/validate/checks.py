@@ -111,6 +111,61 @@ def _delta_problem(delta: float | None, what: str = "delta") -> str | None:
     return None
 
 
+def total_tail_claim(
+    rho_tasil: float | None,
+    kappa: float | None,
+    delta_tasil: float | None,
+    delta_l1: float | None,
+    rho_sde: float | None = None,
+    p: int = 1,
+) -> tuple[float | None, float | None, str | None]:
+    """The total tail claim ``P(||X_t - x*_t|| >= thr) <= delta`` at every ``t``: ``(thr, delta,
+    None)``, or ``(None, None, why)`` when it cannot be formed.
+
+    By the triangle inequality ``||X - x*|| <= ||X - N|| + ||N - x'|| + ||x' - x*||`` with ``N``
+    L1-DRAC's nominal process, and the union bound: ``||X_t - N_t|| < kappa`` with probability
+    ``>= 1 - delta_L1`` (L1-DRAC (130a)), ``max_t ||x'_t - x*_t|| <= rho_TaSIL`` with probability
+    ``>= 1 - delta_TaSIL`` (DRIP Theorem thm:TaSIL). Without a known diffusion ``N = x'`` and
+    ``thr = rho_TaSIL + kappa``, ``delta = delta_TaSIL + delta_L1``. With a known diffusion ``N``
+    is the nominal SDE ``X*`` and ``sup_t ||X*_t - x'_t||_{L_2p} <= rho_sde``
+    (docs/math/contraction.md 6.6); Markov's inequality on the ``2p``-th moment gives
+    ``P(||X*_t - x'_t|| >= r) <= (rho_sde / r)^{2p}``, so at ``delta_sde = delta_L1`` (the
+    confidence the user asked of L1-DRAC) the radius is ``r = rho_sde delta_L1^(-1/(2p))``
+    (rounded up): ``thr = rho_TaSIL + kappa + r``, ``delta = delta_TaSIL + 2 delta_L1``.
+    """
+    reason = (
+        _bound_problem(rho_tasil, "rho_TaSIL")
+        or _bound_problem(kappa, "kappa")
+        or _delta_problem(delta_tasil, "delta_TaSIL")
+        or _delta_problem(delta_l1, "delta_L1")
+    )
+    if reason is None and rho_sde is not None:
+        reason = _bound_problem(rho_sde, "rho_sde")
+    if reason is not None:
+        return None, None, reason
+    assert rho_tasil is not None and kappa is not None  # checked by _bound_problem
+    assert delta_tasil is not None and delta_l1 is not None  # checked by _delta_problem
+    thr = float(rho_tasil) + float(kappa)
+    dsum = float(delta_tasil) + float(delta_l1)
+    what = "delta_TaSIL + delta_L1"
+    if rho_sde is not None:
+        # pow is libm (not correctly rounded): 4 ulps up; a larger threshold is a weaker claim
+        r_sde = _up(float(rho_sde) * float(delta_l1) ** (-1.0 / (2 * p)), 4)
+        thr = _up(thr + r_sde, 1)
+        dsum = float(delta_tasil) + 2.0 * float(delta_l1)
+        what = "delta_TaSIL + 2 delta_L1"
+    bad = _delta_problem(dsum, what)
+    if bad is not None:
+        return None, None, bad
+    return thr, dsum, None
+
+
+def _up(x: float, ulps: int) -> float:
+    for _ in range(ulps):
+        x = math.nextafter(x, math.inf)
+    return x
+
+
 def _num(x: Any) -> float | None:
     return None if x is None else float(x)
 
@@ -652,6 +707,7 @@ def claim_arguments(claims: Any) -> dict[str, Any]:
         "kappa": claims.kappa,
         "delta_l1": claims.delta_l1,
         "rho_mean": claims.rho_mean,
+        "rho_sde": claims.rho_sde,
     }
 
 
@@ -669,6 +725,7 @@ def checks_from_result(
     policy: bool = True,
     with_l1: bool = True,
     rho_mean: float | None = None,
+    rho_sde: float | None = None,
 ) -> list[EmpiricalCheck]:
     """The validation checks of one simulation result against the certified numbers.
 
@@ -696,6 +753,10 @@ def checks_from_result(
         x'_t|| < rho_mean`` (docs/math/l1drac.md 5.6.1; the certificate's
         ``l1drac.decomposition.rho_mean``, in the same coordinates as ``rho_l1``); ``None``
         when the certificate has none (the check is then ``not_checked``).
+    rho_sde
+        ``sup_t ||X*_t - x'_t||_{L_2p} <= rho_sde`` with a known diffusion (the certificate's
+        ``rho.rho_sde``), else ``None``: the total tail then passes through ``X*``
+        (:func:`total_tail_claim`).
 
     Returns
     -------
@@ -832,19 +893,24 @@ def checks_from_result(
         "max_t P(||X_t - x*_t|| >= rho_TaSIL + kappa) vs delta_TaSIL + delta_L1 "
         "(triangle inequality + union bound)"
     )
-    thr = dsum = None
-    reason = (
-        _bound_problem(rho_tasil, "rho_TaSIL")
-        or _bound_problem(kappa, "kappa")
-        or _delta_problem(delta_tasil, "delta_TaSIL")
-        or _delta_problem(delta_l1, "delta_L1")
+    if rho_sde is not None:
+        total_what = (
+            "max_t P(||X_t - x*_t|| >= rho_TaSIL + kappa + rho_sde delta_L1^(-1/2p)) vs "
+            "delta_TaSIL + 2 delta_L1 (triangle inequality through X*, Markov, union bound)"
+        )
+    thr, dsum, reason = total_tail_claim(rho_tasil, kappa, delta_tasil, delta_l1, rho_sde, p)
+    total_note = (
+        "if ||x'_t - x*_t|| <= rho_TaSIL (probability >= 1 - delta_TaSIL, every t) "
+        "and ||X_t - x'_t|| < kappa (probability >= 1 - delta_L1 at this t), then "
+        "||X_t - x*_t|| < rho_TaSIL + kappa"
     )
-    if reason is None:
-        assert rho_tasil is not None and kappa is not None  # checked by _bound_problem
-        assert delta_tasil is not None and delta_l1 is not None  # checked by _delta_problem
-        thr = float(rho_tasil) + float(kappa)
-        dsum = float(delta_tasil) + float(delta_l1)
-        reason = _delta_problem(dsum, "delta_TaSIL + delta_L1")
+    if rho_sde is not None:
+        total_note = (
+            "if ||x'_t - x*_t|| <= rho_TaSIL (probability >= 1 - delta_TaSIL, every t), "
+            "||X_t - X*_t|| < kappa (probability >= 1 - delta_L1 at this t) and "
+            "||X*_t - x'_t|| < rho_sde delta_L1^(-1/2p) (Markov, probability >= 1 - delta_L1), "
+            "then ||X_t - x*_t|| < the threshold"
+        )
     jt = _index(tot.kappas, thr)
     if reason is None and jt is None:
         reason = "the threshold rho_TaSIL + kappa was not simulated"
@@ -870,9 +936,7 @@ def checks_from_result(
                 dsum,
                 level,
                 what=total_what,
-                note="if ||x'_t - x*_t|| <= rho_TaSIL (probability >= 1 - delta_TaSIL, every t) "
-                "and ||X_t - x'_t|| < kappa (probability >= 1 - delta_L1 at this t), then "
-                "||X_t - x*_t|| < rho_TaSIL + kappa",
+                note=total_note,
                 **common,
             )
         )
@@ -882,6 +946,8 @@ def checks_from_result(
     rho_total = None
     if rho_tasil is not None and rho_l1 is not None:
         rho_total = float(rho_tasil) + float(rho_l1)
+        if rho_sde is not None:
+            rho_total += float(rho_sde)
     out.append(
         information(
             "total_gap",

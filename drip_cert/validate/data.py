@@ -50,6 +50,7 @@ from drip_cert.validate.checks import (
     checks_from_result,
     claim_arguments,
     overall_status,
+    total_tail_claim,
 )
 from drip_cert.validate.run import ValidationReport, _thresholds
 from drip_cert.vocabulary import GAPS, SCENARIOS
@@ -847,7 +848,7 @@ def validate_data(
             why = (
                 f"recorded with (omega, lambda_s, T_s) = {data.l1_design}, certified {cert_design}"
             )
-    kappas = _thresholds(kappa, rho_tasil)
+    kappas = _thresholds(c)
     p_max = max(4, 2 * p)
     have = data.available_gaps()
     m = int(data.times.size)
@@ -862,19 +863,14 @@ def validate_data(
             need.append(
                 ("uncertainty_l1", delta_l1, per_time, "P(||X_t - x'_t|| >= kappa) <= delta_L1")
             )
-        if (
-            "total_l1" in have
-            and rho_tasil is not None
-            and math.isfinite(rho_tasil)
-            and delta_tasil is not None
-            and delta_l1 is not None
-        ):
+        thr, dsum, _ = total_tail_claim(rho_tasil, kappa, delta_tasil, delta_l1, c.rho_sde, p)
+        if "total_l1" in have and dsum is not None:
             need.append(
                 (
                     "total_l1",
-                    delta_tasil + delta_l1,
+                    dsum,
                     per_time,
-                    "P(||X_t - x*_t|| >= rho_TaSIL + kappa) <= delta_TaSIL + delta_L1",
+                    f"P(||X_t - x*_t|| >= {thr:.6g}) <= {dsum:.6g} (the total tail)",
                 )
             )
     _require_paths(data, need, level)

@@ -34,6 +34,7 @@ from drip_cert.validate.checks import (
     checks_from_result,
     claim_arguments,
     overall_status,
+    total_tail_claim,
     uncertainty_gap_name,
 )
 from drip_cert.validate.scenarios import (
@@ -288,7 +289,7 @@ def validate(
             "not_checked and the uncertainty gaps shown are those of the true process without "
             "L1-DRAC (for information)"
         )
-    kappas = _thresholds(c.kappa, c.rho_tasil)
+    kappas = _thresholds(c)
     record_every = record_stride(int(round(T / dt)))
     res = run_scenarios(
         s,
@@ -446,11 +447,21 @@ def record_stride(n_steps: int) -> int:
     return min(fits, key=lambda d: (abs(math.log(n_steps / d / RECORDS_TARGET)), d))
 
 
-def _thresholds(kappa: float | None, rho_tasil: float | None) -> tuple[float, ...]:
-    """Tail thresholds to simulate: ``kappa`` and ``rho_TaSIL + kappa`` where finite."""
+def _thresholds(claims: Any) -> tuple[float, ...]:
+    """Tail thresholds to simulate: ``kappa`` and the total tail's threshold
+    (:func:`~drip_cert.validate.checks.total_tail_claim`) where finite."""
     out: list[float] = []
+    kappa = claims.kappa
     if kappa is not None and math.isfinite(kappa) and kappa > 0:
         out.append(float(kappa))
-        if rho_tasil is not None and math.isfinite(rho_tasil) and rho_tasil >= 0:
-            out.append(float(rho_tasil) + float(kappa))
+        thr, _, _ = total_tail_claim(
+            claims.rho_tasil,
+            kappa,
+            claims.delta_tasil,
+            claims.delta_l1,
+            claims.rho_sde,
+            claims.p,
+        )
+        if thr is not None and math.isfinite(thr):
+            out.append(thr)
     return tuple(dict.fromkeys(out))
