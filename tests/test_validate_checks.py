@@ -504,3 +504,25 @@ def test_record_stride_divides_the_steps_and_bounds_the_records():
     for n, want in ((285720, 2381), (10000, 50), (997, 1), (1, 1)):
         d = record_stride(n)
         assert n % d == 0 and n // d <= RECORDS_MOST and d == want, (n, d)
+
+
+def test_a_prime_step_count_drops_a_few_periods_for_a_recording_grid():
+    """1009 periods of one step each (a prime above 1000) recorded only t = T; 1008 periods
+    (2^4 3^2 7) keep 252 records. Counts that already record enough are kept; at most 1 % of
+    the periods is dropped."""
+    from drip_cert.validate.run import (
+        PERIODS_DROP_MOST,
+        RECORDS_LEAST,
+        record_stride,
+        recorded_periods,
+    )
+
+    assert record_stride(1009) == 1009  # the old grid: one record
+    for periods, k in ((1009, 1), (100003, 1), (1009, 3), (500, 1), (997, 1), (7, 1)):
+        m = recorded_periods(periods, k)
+        n = m * k
+        assert periods * (1 - PERIODS_DROP_MOST) <= m <= periods
+        assert n // record_stride(n) >= min(RECORDS_LEAST, periods * k), (periods, k, m)
+    assert recorded_periods(1009, 1) == 1008
+    assert recorded_periods(500, 1) == 500 and recorded_periods(1000, 3) == 1000
+    assert recorded_periods(1009, 3) == 1008  # 3027 = 3 x 1009 records 3 times at most
