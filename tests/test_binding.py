@@ -156,10 +156,13 @@ def test_certificate_json_and_report_name_the_l1drac_binding_chain(tmp_path):
     from the exit floor) and its JSON and Markdown name the chain with its numbers."""
     from drip_cert.bounds.certificate import certify
     from drip_cert.report import certificate_markdown
+    from drip_cert.schema import problems
     from drip_cert.spec.load import load_spec
 
     cert = certify(load_spec(write_spec(tmp_path, SPEC_1D)))
-    parts = cert.to_dict()["parts"]
+    d = cert.to_dict()
+    assert problems(json.loads(json.dumps(d)), "certificate") == []
+    parts = d["parts"]
     l1 = parts["l1drac"]
     assert l1["verdict"] == "conditional"
     b = l1["binding"]
@@ -173,3 +176,55 @@ def test_certificate_json_and_report_name_the_l1drac_binding_chain(tmp_path):
     assert "on the box [[-0.5, 0.5]], all t the rate" in line and f"{rho:.4g}" in line
     # a certified part has no binding condition
     assert all("binding" not in v for v in parts.values() if v["verdict"] == "certified")
+
+
+@pytest.mark.slow  # trains a 64-64 MLP and certifies the 4-D paper example: ~3 min on 2 cores
+def test_paper_plain_mlp_binding_condition(tmp_path, capsys):
+    """Done-means of issue 24 on the paper example: `drip-cert train` with a plain MLP (the
+    spec's [tasil] architecture = "mlp", its 2000 steps (~10 s; at 300 steps the sampled mu_2
+    on the box is still +0.0026), seed 0) then `certify`: the L1-DRAC part is not
+    certified and its binding condition is the chain with numbers: the trace condition rules out
+    every slope-restricted LMI (tr J(s)/n > 0), the box bound is positive while the sampled
+    value is negative, and the exit route has no room (the box is the support)."""
+    import shutil
+
+    from drip_cert.bounds.certificate import certify
+    from drip_cert.report import certificate_markdown
+    from drip_cert.spec.load import load_spec
+    from tests.helpers import PAPER_4D_SPEC, run_cli
+
+    text = PAPER_4D_SPEC.read_text()
+    text = text.replace(
+        'architecture = "residual"\nlipschitz_budget = 0.1\n', 'architecture = "mlp"\n'
+    )
+    text = text.replace('structure = ["h(x)[0]", "h(x)[1]", "h(x)[2]", "h(x)[3]"]\n', "")
+    assert 'architecture = "mlp"' in text and "structure =" not in text
+    for f in ("h.npz", "h.json"):
+        shutil.copy(PAPER_4D_SPEC.parent / f, tmp_path / f)
+    spec = write_spec(tmp_path, text, "paper_mlp.toml")
+    out, trained = tmp_path / "run", tmp_path / "trained.toml"
+    code, _, err = run_cli(
+        capsys, "train", str(spec), "--seed", "0", "--out", str(out),
+        "--no-compare", "--no-certify", "--write-spec", str(trained), "--quiet",
+    )  # fmt: skip
+    assert code == 0, err
+    cert = certify(load_spec(trained))
+    d = cert.to_dict()
+    l1 = d["parts"]["l1drac"]
+    assert l1["verdict"] == "not_certified"
+    b = l1["binding"]
+    assert b["global"]["route"] == "slope-lmi" and b["global"]["trace_over_n"] > 0.0
+    assert b["box"]["proved"] is False
+    assert b["box"]["max_mu_upper"] > 0.0 > b["box"]["max_mu_sampled"]
+    assert b["exit"]["room"] == 0.0 and b["exit"]["useless"] is True
+    assert b["exit"]["used_in_verdict"] is False
+    md = certificate_markdown(cert)
+    line = next(x for x in md.splitlines() if x.startswith("* l1drac not certified, binding"))
+    assert f"tr J(s)/n = {b['global']['trace_over_n']:.4g} > 0" in line
+    assert f"max mu_2 <= {b['box']['max_mu_upper']:.4g} > 0" in line and "no room" in line
+    # train's summary names the same chain as its binding condition (L1DRAC-A2 fails first)
+    from drip_cert.workflows import _binding
+
+    tb = _binding(cert)
+    assert tb["check"] == "L1DRAC-A2" and b["text"] in tb["text"]
+    print(line)  # the numbers, for the record (pytest -s)
