@@ -60,6 +60,11 @@ def certificate_markdown(cert: Any) -> str:
         for k, v in d["parts"].items()
         if v["verdict"] in ("not_requested", "not_applicable")
     )
+    lines.extend(
+        f"* {k} {v['verdict'].replace('_', ' ')}, binding condition: {v['binding']['text']}"
+        for k, v in d["parts"].items()
+        if v.get("binding")
+    )
     lines.append("")
     if d["verdict"] == "certified":
         lines.append(

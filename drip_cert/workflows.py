@@ -585,6 +585,11 @@ def _binding(cert: Certificate) -> dict[str, Any]:
         if role == "not proved"
         else c.detail
     )
+    parts = cert.part_verdicts()
+    l1 = parts.get("l1drac", {})
+    chain = l1.get("binding") if c.id in ("L1DRAC-A2", "L1DRAC-A7") else None
+    if chain is not None and "box" in chain:
+        why = chain["text"]  # the learned loop's chain: all x, the box, the exit probability
     margin = inner["margin"] if inner is not None else c.margin
     text = (
         f"{c.id} {role}"
@@ -614,7 +619,7 @@ def _binding(cert: Certificate) -> dict[str, Any]:
         "holds": c.holds,
         "margin": _json_safe(margin),
         "coordinates": coords,
-        "parts": {k: v["verdict"] for k, v in cert.part_verdicts().items()},
+        "parts": {k: v["verdict"] for k, v in parts.items()},
         "trainable": c.id in _TRAINABLE,
         "text": text + (f"; change: {change}" if change else ""),
         "change": change,

@@ -19,6 +19,7 @@ MODULES = (
     "proofs_check.tasil_rates",
     "proofs_check.tasil_comparison",
     "proofs_check.tasil_tube",
+    "proofs_check.tasil_difference",
     "proofs_check.l1drac_probability",
     "proofs_check.l1drac_adaptation",
     "proofs_check.l1drac_maps",

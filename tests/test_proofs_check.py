@@ -192,3 +192,26 @@ def test_tube_checks_hold_attain_and_fail_on_a_smaller_bound(name, fn):
     assert ok.verdict is Verdict.PASS and ok.residual > -ATTAINED, ok.detail
     res = check(_ctx(name), factor=0.99)
     assert res.verdict is Verdict.FAIL and res.residual > 0
+
+
+def test_difference_route_check_holds_attains_and_fails_on_a_smaller_bound():
+    """docs/math/tasil.md 3.12: the local L_Delta of the difference bounds every sampled ratio,
+    equals it on the tight quadratic instances, and fails when taken 0.99 times too small."""
+    from proofs_check.tasil_difference import check_difference_local
+
+    ok = check_difference_local(_ctx("tasil.difference_local"))
+    assert ok.verdict is Verdict.PASS and ok.residual > -ATTAINED, ok.detail
+    res = check_difference_local(_ctx("tasil.difference_local"), factor=0.99)
+    assert res.verdict is Verdict.FAIL and res.residual > 0
+
+
+def test_which_box_check_holds_and_fails_on_the_demonstrations_box():
+    """docs/math/tasil.md 3.12, "Which box": the hull of the demonstrations and of a set holding
+    every expert trajectory, enlarged by R, holds every new expert tube; the demonstrations' box
+    alone does not."""
+    from proofs_check.tasil_difference import check_which_box
+
+    ok = check_which_box(_ctx("tasil.which_box"))
+    assert ok.verdict is Verdict.PASS, ok.detail
+    res = check_which_box(_ctx("tasil.which_box"), wrong=True)
+    assert res.verdict is Verdict.FAIL and res.residual > 0, res.detail

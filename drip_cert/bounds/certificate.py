@@ -38,6 +38,7 @@ from drip_cert.analysis.growth.constants import (
 )
 from drip_cert.analysis.iss import delta_iss
 from drip_cert.analysis.networks.block_enclosure import block_enclose_callback
+from drip_cert.bounds.binding import l1drac_learned_binding, part_bindings
 from drip_cert.bounds.l1drac.system import l1_section
 from drip_cert.bounds.tasil.tube import expert_tube_bound, horizon_factor_up
 from drip_cert.errors import AssumptionViolation, DripCertError
@@ -60,6 +61,7 @@ from drip_cert.spec.settings import ContractionSettings, Settings
 
 if TYPE_CHECKING:
     from drip_cert.analysis.contraction.lmi import MetricResult
+    from drip_cert.analysis.contraction.slope_lmi import TraceObstruction
     from drip_cert.analysis.iss import DeltaISSResult
     from drip_cert.bounds.l1drac.system import L1Section
     from drip_cert.bounds.tasil.certificate import TasilCertificate
@@ -75,11 +77,15 @@ class ContractionAnalysis:
     euclidean: ContractionResult
     metric: MetricResult | None
     metric_error: str = ""
+    #: the trace condition ruling out every slope-restricted LMI for all x (None: not found)
+    obstruction: TraceObstruction | None = None
 
     def to_dict(self) -> dict[str, Any]:
         out = {"policy": self.policy, **self.euclidean.to_dict()}
         out["metric_rate"] = None if self.metric is None else json_float(self.metric.metric_rate)
         out["metric"] = None if self.metric is None else self.metric.to_dict()
+        if self.obstruction is not None:
+            out["global_obstruction"] = self.obstruction.to_dict()
         if self.metric_error:
             out["metric_error"] = self.metric_error
         return out
@@ -309,7 +315,24 @@ class Certificate:
                 continue
             v, why_v = verdict_of([c for c in self.assumptions if c.id in ids])
             out[part] = {"verdict": v.value, "reasons": list(why_v)}
+        checks = {p: [c for c in self.assumptions if c.id in ids] for p, ids in PARTS.items()}
+        for part, b in part_bindings(out, checks, self._l1_learned_binding()).items():
+            out[part]["binding"] = b
         return out
+
+    def _l1_learned_binding(self) -> dict[str, Any] | None:
+        """The L1-DRAC part's chain when its nominal loop is the learned one, not proved for all
+        x (:func:`~drip_cert.bounds.binding.l1drac_learned_binding`)."""
+        if self.contraction_learned is None or self.l1 is None:
+            return None
+        design = self.l1.design if self.l1.feasible else None
+        return l1drac_learned_binding(
+            self.contraction_learned,
+            self.system.support,
+            self.rho_l1_native,
+            design.p if design is not None else 1,
+            in_z=self.coordinates is not None,
+        )
 
     @property
     def rho_certified(self) -> bool:
@@ -1180,7 +1203,8 @@ def _learned_contraction(
     prove
     nothing, the configured route on the contraction region (a box result)."""
     reasons: list[str] = []
-    g = best_global_rate(s, lam_ex, reasons)
+    obstructions: list[TraceObstruction] = []
+    g = best_global_rate(s, lam_ex, reasons, obstructions)
     notes.extend(f"learned closed loop: {r}" for r in reasons)
     if g is not None and g.result.holds and g.result.how != How.ESTIMATE:
         notes.append(
@@ -1193,7 +1217,8 @@ def _learned_contraction(
             f"learned closed loop: the global {g.result.method} route gives {g.result.rate:.6g} "
             f"(not a contraction: {g.result.note}); the box route follows"
         )
-    return analyse_contraction(s, "learned", opts)
+    box = analyse_contraction(s, "learned", opts)
+    return dataclasses.replace(box, obstruction=obstructions[0]) if obstructions else box
 
 
 def _expert_set(

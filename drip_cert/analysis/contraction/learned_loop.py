@@ -55,7 +55,11 @@ import sympy as sp
 
 from drip_cert.analysis.contraction.lognorm import mu2_constant_bounds
 from drip_cert.analysis.contraction.rate import ContractionResult
-from drip_cert.analysis.contraction.slope_lmi import slope_lmi_rate, slope_structure
+from drip_cert.analysis.contraction.slope_lmi import (
+    TraceObstruction,
+    slope_lmi_rate,
+    slope_structure,
+)
 from drip_cert.analysis.growth.closed_loop import CONVERSION_ULPS, AffineBlocks, affine_in_blocks
 from drip_cert.analysis.networks.mlp import (
     enclose_jacobian,
@@ -301,7 +305,10 @@ def difference_jacobian_bound(s: System, memo: LipMemo | None = None) -> Quantit
 
 
 def slope_lmi_rate_global(
-    s: System, which: str = "learned", reasons: list[str] | None = None
+    s: System,
+    which: str = "learned",
+    reasons: list[str] | None = None,
+    obstructions: list[TraceObstruction] | None = None,
 ) -> GlobalRate | None:
     """Route "slope-lmi": ``mu_2(J(x)) <= -lambda`` for all x from the slope-restricted LMI
     (:func:`~drip_cert.analysis.contraction.slope_lmi.slope_lmi_rate` with ``P = I``), verified in
@@ -309,7 +316,9 @@ def slope_lmi_rate_global(
 
     ``None`` when the loop is not affine in MLP blocks applied to the state or no verified rate
     exists; then the reason (the trace condition's number, the solver status, the LMI size) is
-    appended to ``reasons``.
+    appended to ``reasons`` and, when the trace condition rules every LMI out, the condition
+    (:class:`~drip_cert.analysis.contraction.slope_lmi.TraceObstruction`, its numbers) to
+    ``obstructions``.
     """
     t0 = time.perf_counter()
     if which == "learned" and s.learned is None:
@@ -323,6 +332,8 @@ def slope_lmi_rate_global(
     if res.rate is None:
         if reasons is not None:
             reasons.append(f"slope-lmi route: {res.reason}")
+        if obstructions is not None and res.obstruction.blocks():
+            obstructions.append(res.obstruction)
         return None
     rate = Quantity.derive(
         "lambda",
@@ -341,16 +352,20 @@ def slope_lmi_rate_global(
 
 
 def best_global_rate(
-    s: System, expert_rate: Quantity | None, reasons: list[str] | None = None
+    s: System,
+    expert_rate: Quantity | None,
+    reasons: list[str] | None = None,
+    obstructions: list[TraceObstruction] | None = None,
 ) -> GlobalRate | None:
     """The largest proved rate of the three routes (``None`` when none applies); ``reasons``
-    collects why the slope-lmi route proved nothing, when it did not."""
+    collects why the slope-lmi route proved nothing, when it did not, and ``obstructions`` the
+    trace condition when it rules out every slope-restricted LMI."""
     memo: LipMemo = {}
     cands = [lipschitz_rate(s, "learned", memo)]
     if expert_rate is not None:
         cands.append(perturbation_rate(s, expert_rate, memo))
     if not any(c is not None and c.result.holds for c in cands):
-        cands.append(slope_lmi_rate_global(s, "learned", reasons))
+        cands.append(slope_lmi_rate_global(s, "learned", reasons, obstructions))
     ok = [c for c in cands if c is not None and math.isfinite(c.rate.value)]
     return max(ok, key=lambda c: c.rate.value) if ok else None
 

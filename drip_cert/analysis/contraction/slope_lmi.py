@@ -232,6 +232,30 @@ class TraceObstruction:
     mu2: float
     abscissa: float
     slopes: np.ndarray
+    at_upper: int = -1  #: neurons at the top of their slope range at that vertex (-1: unknown)
+
+    def to_dict(self) -> dict[str, float | int]:
+        """The condition's numbers (JSON-ready floats; a reason, not a bound)."""
+        return {
+            "trace_over_n": self.mean_eigenvalue,
+            "mu2": self.mu2,
+            "abscissa": self.abscissa,
+            "neurons": int(self.slopes.size),
+            "at_upper": self.at_upper,
+        }
+
+    def short(self) -> str:
+        """The binding number in one clause: ``tr J(s)/n = ... > 0 at s = (the vertex)``."""
+        where = (
+            f"{self.at_upper} of {self.slopes.size} neurons at the top of their slope range, "
+            "the rest at the bottom"
+            if self.at_upper >= 0
+            else f"a vertex of the {self.slopes.size} slope ranges"
+        )
+        return (
+            f"tr J(s)/n = {self.mean_eigenvalue:.4g} > 0 at s = ({where}), and mu_P(J) >= "
+            "tr J/n for every metric P"
+        )
 
     def blocks(self, rate: float = 0.0) -> bool:
         """Whether no LMI of the form (11.3) can prove the rate ``rate``."""
@@ -273,6 +297,7 @@ def trace_obstruction(st: SlopeStructure) -> TraceObstruction:
         float(np.linalg.eigvalsh(sym)[-1]),
         float(np.max(np.linalg.eigvals(J).real)),
         s.copy(),
+        int(np.sum(s == st.beta)),
     )
 
 

@@ -8,8 +8,9 @@ room ``r`` from the nominal trajectory (Lemma 11.3), whose probability the grid 
 bounds from fixed-time moments, with the inputs (11.5) of the L1-DRAC closed loop.
 
 Every function rounds outward (:mod:`drip_cert.numerics.rounding`, Arb for ``exp``): the
-returned numbers are upper bounds of the closed forms they name. Not yet called by the
-certificate (section 11.7 says what is missing).
+returned numbers are upper bounds of the closed forms they name. The certificate calls only
+:func:`exit_floor` (a number it displays for a box-only learned loop, never a verdict): section
+11.7 says what the verdict would still need.
 
 Public surface
 --------------
@@ -17,19 +18,27 @@ Public surface
 * :func:`extension_constants` -- ``(k, L_f~, Delta_f~)`` of Proposition 11.1.
 * :func:`l1drac_exit_inputs` -- ``(B, S)`` of (11.5).
 * :func:`grid_exit_bound` -- the right side of (11.4), minimised over a finite grid of ``N, a``.
+* :func:`exit_room` -- an upper bound of the room ``r`` from the support and the box.
+* :func:`exit_floor` -- what (11.4) can give at best from a radius and a room (``>= 1``: nothing).
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
+from fractions import Fraction
+from typing import Any
 
+import numpy as np
 from flint import arb
 
 from drip_cert.numerics.rounding import (
     add_up,
     arb_hi,
+    div_down,
     div_up,
+    mul_down,
     mul_up,
     sqrt_up,
     sub_down,
@@ -37,6 +46,9 @@ from drip_cert.numerics.rounding import (
 
 __all__ = [
     "ExitBound",
+    "ExitFloor",
+    "exit_floor",
+    "exit_room",
     "extension_constants",
     "extension_gain",
     "grid_exit_bound",
@@ -162,3 +174,71 @@ def grid_exit_bound(
                 best = ExitBound(delta=d, n=n, a=a)
         n *= 2
     return best
+
+
+def exit_room(support: Sequence[Sequence[float]], box: Sequence[Sequence[float]]) -> float:
+    """An upper bound of the room ``r`` of section 11 (rounded up; 0 when the support is not
+    inside the open box).
+
+    The learned nominal trajectories start everywhere on the support, so the set ``S'`` they stay
+    in contains it, and ``r = dist(S', complement of R) <= dist(support, complement of R) =
+    min_i min(lo_i(support) - lo_i(R), hi_i(R) - hi_i(support))`` for boxes.
+    """
+    sup = np.asarray(support, dtype=float)
+    reg = np.asarray(box, dtype=float)
+    pairs = list(zip(sup[:, 0], reg[:, 0], strict=True))
+    pairs += list(zip(reg[:, 1], sup[:, 1], strict=True))
+    gap = min(Fraction(float(a)) - Fraction(float(b)) for a, b in pairs)  # exact
+    if gap <= 0:
+        return 0.0
+    out = float(gap)
+    return out if Fraction(out) >= gap else math.nextafter(out, math.inf)
+
+
+@dataclass(frozen=True)
+class ExitFloor:
+    """What the exit route of section 11 can give at best (a displayed number, never a verdict).
+
+    ``floor`` is a lower bound of every right side of (11.4) with the radius ``rho`` and a room
+    at most ``room`` (``inf`` when ``room = 0``: Lemma 11.3 needs ``r > 0``): ``N (rho / a)^q >
+    (rho / r)^q`` for ``N >= 1``, ``a < r``. ``useless`` when ``floor >= 1`` (then ``delta_exit >=
+    1``, no probability statement).
+    """
+
+    rho: float
+    room: float
+    q: int
+    floor: float
+
+    @property
+    def useless(self) -> bool:
+        """``delta_exit >= 1`` by this route."""
+        return not self.floor < 1.0
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready numbers (``inf`` as the string ``"inf"``)."""
+
+        def num(v: float) -> float | str:
+            return v if math.isfinite(v) else ("inf" if v > 0 else "-inf")
+
+        return {
+            "rho": num(self.rho),
+            "room": self.room,
+            "q": self.q,
+            "delta_exit_floor": num(self.floor),
+            "useless": self.useless,
+        }
+
+
+def exit_floor(*, rho: float, room: float, q: int) -> ExitFloor:
+    """``(rho / room)^q`` rounded down (``inf`` for ``room = 0`` or an infinite ``rho``): no
+    choice of ``N`` and split in (11.4) goes below it (see :class:`ExitFloor`)."""
+    if q < 2 or not room >= 0.0:
+        raise ValueError(f"need q >= 2 and room >= 0, got {q}, {room}")
+    if room == 0.0 or not math.isfinite(rho):
+        return ExitFloor(rho, room, q, math.inf)
+    ratio = div_down(rho, room)
+    out = 1.0
+    for _ in range(q):
+        out = mul_down(out, ratio)
+    return ExitFloor(rho, room, q, out)

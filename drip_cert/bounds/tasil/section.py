@@ -36,7 +36,7 @@ from drip_cert.numerics.rounding import add_up
 from drip_cert.provenance import How, Quantity
 from drip_cert.spec.settings import TasilSettings
 
-__all__ = ["tasil_section", "trajectory_h"]
+__all__ = ["l_delta_box", "tasil_section", "trajectory_h"]
 
 #: held-out thresholds tau_j = 1.25 x the training maxima of h_j: any tau computed from the training
 #: data is valid for the held-out form (docs/math/tasil.md 3.3 c); the bare maxima are exceeded by
@@ -109,6 +109,24 @@ def h0_by_lipschitz(
     delta, _, speeds, sound = _along(s, demos, speed_sound)
     h0 = [h0_lipschitz(demos.times, d, v, lip) for d, v in zip(delta, speeds)]
     return h0, How.SOUND if sound else How.ESTIMATE
+
+
+def l_delta_box(points: np.ndarray, S: np.ndarray | None, margin: float) -> np.ndarray:
+    """The box on which a box-scoped ``L_Delta`` is computed (docs/math/tasil.md 3.12, "Which
+    box"): the hull of the box around ``points`` (every training and held-out expert state) and
+    of ``S`` (a box proved to hold every expert trajectory from the support; ``None``: not
+    known), enlarged by the tube radius ``margin`` on every side (in floats, as before this
+    function existed: rounding outward moved the paper plain MLP's local ``L_Delta`` by 1 %).
+
+    Only with ``S`` does the box contain the tube of radius ``margin`` around the expert
+    trajectory of a *new* initial state, which is where the lemma uses ``L_Delta``.
+    """
+    pts = np.asarray(points, dtype=float).reshape(-1, np.shape(points)[-1])
+    lo, hi = pts.min(axis=0), pts.max(axis=0)
+    if S is not None:
+        S = np.asarray(S, dtype=float)
+        lo, hi = np.minimum(lo, S[:, 0]), np.maximum(hi, S[:, 1])
+    return np.stack([lo - margin, hi + margin], axis=1)
 
 
 def _l_delta(
@@ -217,7 +235,7 @@ def tasil_section(
     pts = np.concatenate(
         [d.states.reshape(-1, s.n) for d in (train, heldout) if d is not None], axis=0
     )
-    box = np.stack([pts.min(axis=0) - margin, pts.max(axis=0) + margin], axis=1)
+    box = l_delta_box(pts, None, margin)
     L_il, L_ex, L_tri, L_dir, direct, L_Delta = _l_delta(s, box)
     covers, cover_why = True, "L_Delta holds for all x"
     if not L_Delta.scope.all_x:
@@ -230,12 +248,9 @@ def tasil_section(
                 "bound says nothing about the trajectory of a new initial state"
             )
         else:
-            S = np.asarray(S, dtype=float)
-            need = np.stack([S[:, 0] - margin, S[:, 1] + margin], axis=1)
-            if np.any(need[:, 0] < box[:, 0]) or np.any(need[:, 1] > box[:, 1]):
-                box = np.stack(
-                    [np.minimum(box[:, 0], need[:, 0]), np.maximum(box[:, 1], need[:, 1])], axis=1
-                )
+            wide = l_delta_box(pts, np.asarray(S, dtype=float), margin)
+            if not np.array_equal(wide, box):
+                box = wide
                 L_il, L_ex, L_tri, L_dir, direct, L_Delta = _l_delta(s, box)
             cover_why = (
                 f"L_Delta is proved on a box holding {why}, enlarged by the tube radius "
