@@ -442,3 +442,23 @@ def test_comparison_route_is_not_taken_when_the_lemma_is_smaller():
     )
     assert cert.gap_route == "lemma" and cert.gap_bound == lemma.gap_bound
     assert cert.form("held_out").value == lemma.form("held_out").value
+
+
+def test_l_delta_box_contains_the_exact_tube_box():
+    """The box of a box-scoped L_Delta must contain the tube (tasil.md 3.12): its edges are
+    rounded outward, checked in exact rational arithmetic on seeded random points."""
+    from fractions import Fraction
+
+    from drip_cert.bounds.tasil.section import l_delta_box
+
+    rng = np.random.default_rng(12)
+    for _ in range(50):
+        pts = rng.normal(size=(7, 3)) * 0.37
+        S = np.sort(rng.normal(size=(3, 2)), axis=1)
+        margin = float(rng.uniform(0.01, 0.3))
+        box = l_delta_box(pts, S, margin)
+        for i in range(3):
+            lo = min(Fraction(float(pts[:, i].min())), Fraction(float(S[i, 0])))
+            hi = max(Fraction(float(pts[:, i].max())), Fraction(float(S[i, 1])))
+            assert Fraction(float(box[i, 0])) <= lo - Fraction(margin)
+            assert Fraction(float(box[i, 1])) >= hi + Fraction(margin)
