@@ -29,6 +29,7 @@ from typing import Any, TypedDict, Unpack
 
 from drip_cert.bounds.l1drac.appendix import (
     RefConstants,
+    SamplingConstants,
     TrueConstants,
     reference_constants,
     true_constants,
@@ -42,6 +43,7 @@ from drip_cert.bounds.l1drac.sides import (
     sides_21a,
     sides_21b,
     sides_24,
+    sides_24_at,
 )
 from drip_cert.bounds.l1drac.verify import CONDITIONS, verify_conditions
 from drip_cert.errors import SpecError
@@ -224,6 +226,18 @@ def float_24(
 ) -> ConditionResult:
     """(24) in float64 (on the monotone envelope of (A.13)-(A.17) when ``envelope``)."""
     return _result("24", *sides_24(c, tc, p, omega, lambda_s, Ts, rho_r, rho_a, envelope=envelope))
+
+
+def float_24_at(
+    c: L1Constants,
+    tc: TrueConstants,
+    s: SamplingConstants,
+    omega: float,
+    rho_r: float,
+    rho_a: float,
+) -> ConditionResult:
+    """:func:`float_24` on sampling constants computed once (a search over the radii)."""
+    return _result("24", *sides_24_at(c, tc, s, omega, rho_r, rho_a))
 
 
 def float_conditions(
