@@ -90,16 +90,16 @@ def analyse_contraction(s: System, which: str, opts: ContractionSettings) -> Con
     Implements the check of DRIP Assumption 2 (expert) and L1-DRAC Assumption 2 (learned closed
     loop, the nominal system of the L1-DRAC layer).
     """
-    from drip_cert._jax import jax, jnp  # jax: keep off the API's import path
+    from drip_cert._jax import jnp  # jax: keep off the API's import path
 
     J = s.closed_loop_jacobian(which)
     box = np.array(opts.region if opts.region is not None else s.support, dtype=float)
     depends_t = J.has(s.t)
     t_range = (0.0, s.horizon) if depends_t else None
-    jac = s.numeric.jac_expert if which == "expert" else s.numeric.jac_learned
-    if jac is None:
-        raise DripCertError(f"the {which} closed loop has no Jacobian (no {which} policy)")
-    jv = jax.jit(jax.vmap(jac, in_axes=(0, 0)))
+    try:
+        jv = s.numeric.jac_batched(which)  # jitted once per model
+    except ValueError as exc:
+        raise DripCertError(str(exc)) from None
 
     def J_num(tt, X):
         X = jnp.asarray(X, dtype=jnp.float64)
