@@ -628,7 +628,10 @@ def certify(
     is slower than the metric rate, also for the equivalent system in ``z = Theta x``
     (``P = Theta^T Theta``); the better one is returned (verdict first, then fewer failing
     checks, then the smaller finite radii in ``x``; a tie keeps ``x``), the other summarised
-    under ``coordinates.alternatives``.
+    under ``coordinates.alternatives``. The metric candidates are finished best-first, and a
+    candidate whose L1-DRAC design could not make it the choice (a lower bound on its order
+    computed before the design, :func:`_finish_candidates`) is not designed: it is listed with
+    verdict ``"skipped"`` and the bound that ruled it out.
     ``"lmi"`` always uses the metric when one is found, a given matrix ``P`` uses that metric,
     ``"euclidean"`` never changes coordinates.
     """
