@@ -95,3 +95,42 @@ def test_cart_pole_designs_only_the_candidate_that_can_win(monkeypatch):
         cert.rho_tasil + cert.rho_l1
     )
     json.dumps(cert.to_dict())  # the summary is JSON
+
+
+def test_skip_rule_chooses_what_finishing_every_candidate_chooses(monkeypatch):
+    """Random keys with random lower bounds (ties included): the candidate chosen among those
+    finished is the one ``min`` chooses among all, in pool order, and only candidates whose
+    bound rules them out are skipped."""
+    from types import SimpleNamespace
+
+    import drip_cert.bounds.certificate as C
+
+    rng = np.random.default_rng(7)
+    monkeypatch.setattr(C, "_finish", lambda u: u.cert)
+    monkeypatch.setattr(C, "_preference", lambda cert: cert.key)
+    monkeypatch.setattr(C, "_skipped_summary", lambda u, low, best: {"skipped": u.cert})
+    skipped_any = False
+    for _ in range(300):
+        n_head, n = int(rng.integers(0, 2)), int(rng.integers(1, 5))
+        keys = [
+            (int(rng.integers(0, 2)), int(rng.integers(0, 2)), float(rng.integers(0, 3)))
+            for _ in range(n_head + n)
+        ]
+        head = [SimpleNamespace(key=k) for k in keys[:n_head]]
+        cands = []
+        for k in keys[n_head:]:
+            low = (k[0], k[1], k[2] - float(rng.integers(0, 2)))  # <= the key, ties often
+            u = SimpleNamespace(
+                cert=SimpleNamespace(key=k),
+                l1=SimpleNamespace(designs=True),
+                change=None,
+                key_lower_bound=lambda low=low: low,
+            )
+            cands.append(u)
+        out = C._finish_candidates(head, cands, lambda *a: None)
+        pool = [*head, *(c for c in out if not isinstance(c, dict))]
+        chosen = min(pool, key=lambda c: c.key)
+        full = min([*head, *(u.cert for u in cands)], key=lambda c: c.key)
+        assert chosen is full
+        skipped_any |= any(isinstance(c, dict) for c in out)
+    assert skipped_any
