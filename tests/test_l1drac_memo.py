@@ -76,3 +76,21 @@ def test_radii_searched_once_per_omega_in_a_design(monkeypatch):
     assert d.feasible
     # the nested omega / lambda_s search visits each omega ~ 40 times: once here
     assert len(omegas) == len(set(omegas)) > 10
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_holds_24_at_is_the_holds_of_float_24(seed):
+    from drip_cert.bounds.l1drac.appendix import sampling_constants
+    from drip_cert.bounds.l1drac.conditions import float_24, holds_24_at
+
+    c = random_constants(np.random.default_rng(seed)) if seed else di_constants()
+    p, tc, lam = 1, true_constants(c, 1), float(c.lam)
+    seen = set()
+    for kw, kl, kt in POINTS:
+        w, ls, Ts = kw * lam, kl * lam, kt / lam
+        s = sampling_constants(c, p, w, Ts, ls)
+        for rho_a in np.geomspace(1e-3, 1e3, 25):
+            want = float_24(c, tc, p, w, ls, Ts, 1.5, float(rho_a)).holds
+            assert holds_24_at(c, tc, s, w, 1.5, float(rho_a)) is want
+            seen.add(want)
+    assert seen == {True, False}  # both answers exercised
