@@ -39,12 +39,12 @@ from drip_cert.analysis.growth.constants import (
 from drip_cert.analysis.iss import delta_iss
 from drip_cert.analysis.networks.block_enclosure import block_enclose_callback
 from drip_cert.bounds.binding import l1drac_learned_binding, part_bindings
-from drip_cert.bounds.l1drac.system import l1_section
+from drip_cert.bounds.l1drac.system import L1Inputs, L1Section, design_section, l1_inputs
 from drip_cert.bounds.tasil.tube import expert_tube_bound, horizon_factor_up
 from drip_cert.errors import AssumptionViolation, DripCertError
 from drip_cert.model.fingerprint import Fingerprint, fingerprint_of
 from drip_cert.model.system import System
-from drip_cert.numerics.rounding import div_up, mul_up, up
+from drip_cert.numerics.rounding import div_up, mul_down, mul_up, sum_down, up
 from drip_cert.progress import Stages
 from drip_cert.provenance import (
     Check,
@@ -63,7 +63,6 @@ if TYPE_CHECKING:
     from drip_cert.analysis.contraction.lmi import MetricResult
     from drip_cert.analysis.contraction.slope_lmi import TraceObstruction
     from drip_cert.analysis.iss import DeltaISSResult
-    from drip_cert.bounds.l1drac.system import L1Section
     from drip_cert.bounds.tasil.certificate import TasilCertificate
     from drip_cert.learn.imitation import DemonstrationSet
     from drip_cert.model.mlp import MLP
@@ -97,16 +96,16 @@ def analyse_contraction(s: System, which: str, opts: ContractionSettings) -> Con
     Implements the check of DRIP Assumption 2 (expert) and L1-DRAC Assumption 2 (learned closed
     loop, the nominal system of the L1-DRAC layer).
     """
-    from drip_cert._jax import jax, jnp  # jax: keep off the API's import path
+    from drip_cert._jax import jnp  # jax: keep off the API's import path
 
     J = s.closed_loop_jacobian(which)
     box = np.array(opts.region if opts.region is not None else s.support, dtype=float)
     depends_t = J.has(s.t)
     t_range = (0.0, s.horizon) if depends_t else None
-    jac = s.numeric.jac_expert if which == "expert" else s.numeric.jac_learned
-    if jac is None:
-        raise DripCertError(f"the {which} closed loop has no Jacobian (no {which} policy)")
-    jv = jax.jit(jax.vmap(jac, in_axes=(0, 0)))
+    try:
+        jv = s.numeric.jac_batched(which)  # jitted once per model
+    except ValueError as exc:
+        raise DripCertError(str(exc)) from None
 
     def J_num(tt, X):
         X = jnp.asarray(X, dtype=jnp.float64)
@@ -652,7 +651,10 @@ def certify(
     is slower than the metric rate, also for the equivalent system in ``z = Theta x``
     (``P = Theta^T Theta``); the better one is returned (verdict first, then fewer failing
     checks, then the smaller finite radii in ``x``; a tie keeps ``x``), the other summarised
-    under ``coordinates.alternatives``.
+    under ``coordinates.alternatives``. The metric candidates are finished best-first, and a
+    candidate whose L1-DRAC design could not make it the choice (a lower bound on its order
+    computed before the design, :func:`_finish_candidates`) is not designed: it is listed with
+    verdict ``"skipped"`` and the bound that ruled it out.
     ``"lmi"`` always uses the metric when one is found, a given matrix ``P`` uses that metric,
     ``"euclidean"`` never changes coordinates.
     """
@@ -694,7 +696,7 @@ def certify(
         from drip_cert.learn.imitation import demonstration_set  # jax: keep off the API's path
 
         demonstrations = demonstration_set(spec.system, spec.settings.tasil)
-    in_z = []
+    prepared = []
     for m in metrics:
         change = coordinates_from_metric(
             m.P,
@@ -702,13 +704,18 @@ def certify(
             f"cond P <= {m.kappa:g})",
         )
         stage(f"the certificate in z = Theta x (rate {m.metric_rate:.6g}, cond P {m.cond_P:.3g})")
-        in_z.append(_certify_in_metric(spec, change, demonstrations, stage))
-    stage.done()
+        prepared.append(_prepare_in_metric(spec, change, demonstrations, stage))
     # z only when strictly better: a tie keeps the user's own coordinates (listed first)
-    pool = in_z if opts.coordinates == "lmi" else [cert_x, *in_z]
+    head = [] if opts.coordinates == "lmi" else [cert_x]
+    in_z = _finish_candidates(head, prepared, stage)
+    stage.done()
+    pool = [*head, *(c for c in in_z if isinstance(c, Certificate))]
     chosen = min(pool, key=_preference)
     others = [c for c in [cert_x, *in_z] if c is not chosen]
-    chosen = dataclasses.replace(chosen, alternatives=tuple(_summary(c) for c in others))
+    chosen = dataclasses.replace(
+        chosen,
+        alternatives=tuple(c if isinstance(c, dict) else _summary(c) for c in others),
+    )
     if chosen.coordinates is not None:
         # the best constant-metric rate found (in x: the rate-maximising LMI metric) is reported
         # as contraction.metric_rate; the checks above use the metric chosen by the final radius
@@ -723,6 +730,74 @@ larger): the candidates of the rate / condition-number trade-off of the coordina
 
 
 _VERDICT_ORDER = {Verdict.CERTIFIED: 0, Verdict.CONDITIONAL: 1, Verdict.NOT_CERTIFIED: 2}
+
+
+def _finish_candidates(
+    head: list[Certificate], cands: list[_Unfinished], stage: Stages
+) -> list[Certificate | dict[str, Any]]:
+    """The metric candidates, finished best-first; a candidate that cannot beat the best found
+    is not designed (its summary, with the bound that ruled it out, takes its place).
+
+    The candidates are finished in the order of :meth:`_Unfinished.key_lower_bound` (ties: the
+    order given). With ``(K, i)`` the key and pool position (``head`` first) of the one
+    :func:`_preference` chooses among those finished so far, candidate ``j`` with bound ``L``
+    is skipped when ``L > K``, or ``L == K`` and ``j > i``: its key is ``>= L``, and ``min``
+    keeps the first of equal keys, so it could not be chosen, and the choice among the rest is
+    the choice among all (the chosen certificate is the one finishing every candidate gives).
+    Deterministic: the bounds are functions of the inputs.
+    """
+    n0 = len(head)
+    lows = [u.key_lower_bound() for u in cands]
+    out: list[Certificate | dict[str, Any] | None] = [None] * len(cands)
+    best: tuple[tuple[int, int, float], int] | None = None
+    for i, c in enumerate(head):
+        if best is None or _preference(c) < best[0]:
+            best = (_preference(c), i)
+    for j in sorted(range(len(cands)), key=lambda j: (lows[j], j)):
+        u, low = cands[j], lows[j]
+        designs = u.l1 is not None and u.l1.designs
+        if designs and best is not None and (low, n0 + j) > (best[0], best[1]):
+            out[j] = _skipped_summary(u, low, best[0])
+            continue
+        if u.change is not None:
+            stage(f"finishing the candidate in z = Theta x (cond Theta {u.change.cond:.3g})")
+        cert = _finish(u)
+        out[j] = cert
+        key = _preference(cert)
+        if best is None or (key, n0 + j) < (best[0], best[1]):
+            best = (key, n0 + j)
+    return [c for c in out if c is not None]
+
+
+def _skipped_summary(
+    u: _Unfinished, low: tuple[int, int, float], best: tuple[int, int, float]
+) -> dict[str, Any]:
+    """The summary of a candidate not designed: what it has, and the bound that ruled it out."""
+    assert u.change is not None and u.l1 is not None
+    rt = u.rho_tasil_x()
+    lo_l1 = 0.0 if isinstance(u.l1.inputs, L1Section) else u.l1.inputs.rho_lower_bound()
+    return {
+        "coordinates": "z = Theta x",
+        "verdict": "skipped",
+        "expert_rate": json_float(u.c.expert.euclidean.rate),
+        "cond_theta": json_float(u.change.cond),
+        "rho_tasil_x": json_float(rt) if rt is not None else None,
+        "rho_l1_x": None,
+        "rho_l1_x_at_least": json_float(mul_down(u.change.to_x, lo_l1)),
+        "factor_to_x": u.change.to_x,
+        "failing": low[1],
+        "verdict_reasons": [
+            "not designed: its L1-DRAC design could not make it the choice. Before the design "
+            f"its verdict is at best {_VERDICT_NAMES[low[0]]} with {low[1]} failing checks, "
+            f"and rho_TaSIL + rho_L1 >= {low[2]:.6g} in x (rho_L1 >= {lo_l1:.6g} in z for any "
+            "design: L1-DRAC (16a), (16b), (21a) at any omega, bounds/l1drac/lower.py); a "
+            f"certificate finished before it has verdict {_VERDICT_NAMES[best[0]]}, {best[1]} "
+            f"failing checks, rho {best[2]:.6g} in x"
+        ],
+    }
+
+
+_VERDICT_NAMES = {v: k.value for k, v in _VERDICT_ORDER.items()}
 
 
 def _preference(c: Certificate) -> tuple[int, int, float]:
@@ -753,6 +828,13 @@ def _certify_in_metric(
     spec: Spec, change: CoordinateChange, demonstrations: DemonstrationSet | None, stage: Stages
 ) -> Certificate:
     """The certificate of the equivalent system in ``z = Theta x``, labelled with ``change``."""
+    return _finish(_prepare_in_metric(spec, change, demonstrations, stage))
+
+
+def _prepare_in_metric(
+    spec: Spec, change: CoordinateChange, demonstrations: DemonstrationSet | None, stage: Stages
+) -> _Unfinished:
+    """:func:`_prepare_in` for the equivalent system in ``z = Theta x``."""
     zspec = spec.in_coordinates(change.theta)
     demos = demonstrations
     if demos is None and spec.system.learned is not None:
@@ -760,9 +842,8 @@ def _certify_in_metric(
 
         demos = demonstration_set(spec.system, spec.settings.tasil)
     zdemos = None if demos is None else _demonstrations_in_z(demos, change)
-    cert = _certify_in(zspec, zdemos, stage)
-    fp = fingerprint_of(spec.system, _deployed_design(cert.l1), change.theta)  # of x, not z
-    return dataclasses.replace(cert, coordinates=change, fingerprint=fp)
+    u = _prepare_in(zspec, zdemos, stage)
+    return dataclasses.replace(u, change=change, x_system=spec.system)
 
 
 def _demonstrations_in_z(demos: DemonstrationSet, change: CoordinateChange) -> DemonstrationSet:
@@ -790,14 +871,68 @@ def _demonstrations_in_z(demos: DemonstrationSet, change: CoordinateChange) -> D
 def _certify_in(spec: Spec, demonstrations: DemonstrationSet | None, stage: Stages) -> Certificate:
     """The certificate of ``spec`` in its own coordinates (see :func:`certify`): one call per
     part, in the order their checks, notes and skipped parts appear in the certificate."""
+    return _finish(_prepare_in(spec, demonstrations, stage))
+
+
+@dataclass(frozen=True)
+class _Unfinished:
+    """A certificate computed up to its L1-DRAC design (the costly part of a candidate)."""
+
+    spec: Spec
+    k: _Constants
+    c: _ContractionPart
+    a: _L1Assumptions
+    d: _DeltaISSPart
+    t: _TasilPart
+    l1: _L1Prepared | None  #: None: no L1-DRAC part
+    change: CoordinateChange | None = None  #: None: in the spec's own coordinates
+    x_system: System | None = None  #: with ``change``: the system in x (of the fingerprint)
+
+    def key_lower_bound(self) -> tuple[int, int, float]:
+        """A lower bound, in the order of :func:`_preference`, on the finished certificate's
+        key: adding the L1-DRAC check can only worsen the verdict and add failing checks; a
+        failing design adds one (a larger key whatever the radius); a feasible one has
+        ``rho_L1 >= `` :meth:`~drip_cert.bounds.l1drac.system.L1Inputs.rho_lower_bound`,
+        mapped to x rounded down (``rho_L1`` in x is ``factor_to_x rho_L1(z)`` rounded up)."""
+        checks = (*self.c.checks, *self.a.checks, *self.t.checks)
+        v = _VERDICT_ORDER[verdict_of(checks)[0]]
+        failing = sum(1 for ch in checks if not ch.holds)
+        lo = 0.0
+        if self.l1 is not None and not isinstance(self.l1.inputs, L1Section):
+            lo = self.l1.inputs.rho_lower_bound()
+            if self.change is not None:
+                lo = mul_down(self.change.to_x, lo)
+        rt = self.rho_tasil_x()
+        parts = [v_ for v_ in (rt, lo) if v_ is not None and math.isfinite(v_)]
+        return v, failing, sum_down(parts) if parts else 0.0
+
+    def rho_tasil_x(self) -> float | None:
+        """``rho_TaSIL`` in x (as :attr:`Certificate.rho_tasil` reports it)."""
+        tasil = self.t.section
+        if tasil is None or tasil.rho is None:
+            return None
+        v = float(tasil.rho)
+        return v if self.change is None else self.change.gap_in_x(v)
+
+
+def _prepare_in(spec: Spec, demonstrations: DemonstrationSet | None, stage: Stages) -> _Unfinished:
+    """Every part of the certificate of ``spec`` but the L1-DRAC design (:func:`_finish`)."""
     s, settings = spec.system, spec.settings
     k = _constants_part(s, settings, stage)
     c = _contraction_part(s, settings.contraction, k, stage)
     a = _l1drac_assumptions(s, settings, k, c)
     d = _delta_iss_part(c, k)
     t = _tasil_part(s, settings, demonstrations, k, c, d, stage)
-    l1 = _l1drac_part(s, settings, k, a, stage) if a.wanted else _L1Part(None, (), ())
-    return Certificate(
+    l1 = _l1drac_prepare(s, settings, k, a, stage) if a.wanted else None
+    return _Unfinished(spec, k, c, a, d, t, l1)
+
+
+def _finish(u: _Unfinished) -> Certificate:
+    """The certificate of a prepared candidate: its L1-DRAC design, then the assembly."""
+    spec, k, c, a, d, t = u.spec, u.k, u.c, u.a, u.d, u.t
+    s = spec.system
+    l1 = _L1Part(None, (), ()) if u.l1 is None else _l1drac_finish(s, u.l1)
+    cert = Certificate(
         system=s,
         assumptions=(*c.checks, *a.checks, *t.checks, *l1.checks),
         inputs=k.ic,
@@ -814,6 +949,11 @@ def _certify_in(spec: Spec, demonstrations: DemonstrationSet | None, stage: Stag
         skipped=(*a.skipped, *t.skipped),
         fingerprint=fingerprint_of(s, _deployed_design(l1.section)),
     )
+    if u.change is None:
+        return cert
+    assert u.x_system is not None
+    fp = fingerprint_of(u.x_system, _deployed_design(cert.l1), u.change.theta)  # of x, not z
+    return dataclasses.replace(cert, coordinates=u.change, fingerprint=fp)
 
 
 @dataclass(frozen=True)
@@ -1089,10 +1229,32 @@ class _L1Part:
     notes: tuple[str, ...]
 
 
+@dataclass(frozen=True)
+class _L1Prepared:
+    """The L1-DRAC part up to its design: the rate it rests on, the constants and request (or
+    a section without a design when there can be none), the notes."""
+
+    lam: Quantity
+    inputs: L1Inputs | L1Section
+    notes: tuple[str, ...]
+
+    @property
+    def designs(self) -> bool:
+        """Whether finishing runs the designer (the costly part)."""
+        return not isinstance(self.inputs, L1Section)
+
+
 def _l1drac_part(
     s: System, settings: Settings, k: _Constants, a: _L1Assumptions, stage: Stages
 ) -> _L1Part:
     """The L1-DRAC design on the rate of its nominal loop (L1-DRAC (16), (21), (24))."""
+    return _l1drac_finish(s, _l1drac_prepare(s, settings, k, a, stage))
+
+
+def _l1drac_prepare(
+    s: System, settings: Settings, k: _Constants, a: _L1Assumptions, stage: Stages
+) -> _L1Prepared:
+    """The L1-DRAC constants on the rate of its nominal loop, and the design request."""
     stage("L1-DRAC constants, design and its verification in Arb")
     src = a.source
     notes: list[str] = []
@@ -1116,7 +1278,7 @@ def _l1drac_part(
             "the L1-DRAC design uses a sampled estimate of the contraction rate of "
             f"the {src.policy} closed loop ({est:.6g}); it is not certified"
         )
-    l1 = l1_section(
+    inputs = l1_inputs(
         s,
         settings.l1drac,
         settings.constants,
@@ -1126,6 +1288,13 @@ def _l1drac_part(
         {q.name: q for q in k.ic.quantities()},
         k.uc.values,
     )
+    return _L1Prepared(lam_q, inputs, tuple(notes))
+
+
+def _l1drac_finish(s: System, prep: _L1Prepared) -> _L1Part:
+    """The L1-DRAC design of prepared inputs (verified in Arb) and its check."""
+    lam_q, notes = prep.lam, prep.notes
+    l1 = prep.inputs if isinstance(prep.inputs, L1Section) else design_section(prep.inputs)
     design_inputs = list(l1.constants.values())
     design_values = l1.design.to_dict() if l1.design is not None else {}
     dcheck = Check.derive(
@@ -1151,7 +1320,7 @@ def _l1drac_part(
         inputs=design_inputs,
         source="L1-DRAC (16), (21), (24)",
     )
-    return _L1Part(l1, (dcheck.with_scope(*_sde_scope(dcheck.scope, s.horizon)),), tuple(notes))
+    return _L1Part(l1, (dcheck.with_scope(*_sde_scope(dcheck.scope, s.horizon)),), notes)
 
 
 def _unmatched_check(lam_l1: Quantity, ic: InputConstants, uc: UncertaintyConstants) -> Check:

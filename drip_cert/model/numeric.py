@@ -16,6 +16,7 @@ per system); :func:`make_model` builds one from plain jax functions. Nothing her
 from __future__ import annotations
 
 import inspect
+import weakref
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -117,6 +118,21 @@ class SimModel:
             )
         self._check_shapes()
 
+    def jac_batched(self, which: str) -> Callable:
+        """``jax.jit(jax.vmap(jac))`` of the ``"expert"`` or ``"learned"`` closed-loop Jacobian:
+        ``(T, X) -> (B, n, n)`` for ``T`` of shape ``(B,)`` and ``X`` of shape ``(B, n)``.
+
+        Built once per model and kept (jit caches its traces and compilations on the function
+        object, so every later analysis of this model reuses them); ``ValueError`` when the
+        model has no such Jacobian (no learned policy)."""
+        cache = _JAC_BATCHED.setdefault(self, {})
+        if which not in cache:
+            jac = self.jac_expert if which == "expert" else self.jac_learned
+            if jac is None:
+                raise ValueError(f"the {which} closed loop has no Jacobian (no {which} policy)")
+            cache[which] = jax.jit(jax.vmap(jac, in_axes=(0, 0)))
+        return cache[which]
+
     def _check_shapes(self) -> None:
         """Trace every callable once (no FLOPs) and compare the output shapes with n, m, d."""
         n, m, d = self.n, self.m, self.d
@@ -150,6 +166,11 @@ class SimModel:
                     f"returns shape {got}, expected {shape} for n={n}, m={m}, d={d}",
                     field=f"SimModel.{fld}",
                 )
+
+
+_JAC_BATCHED: weakref.WeakKeyDictionary[SimModel, dict[str, Callable]] = weakref.WeakKeyDictionary()
+"""The jitted batched Jacobians of each model (:meth:`SimModel.jac_batched`), kept beside the
+model (a frozen dataclass that may be pickled) and dropped with it."""
 
 
 def closed_loop_jacobian(f: Callable, g: Callable, policy: Callable) -> Callable:

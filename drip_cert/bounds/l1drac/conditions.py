@@ -29,6 +29,7 @@ from typing import Any, TypedDict, Unpack
 
 from drip_cert.bounds.l1drac.appendix import (
     RefConstants,
+    SamplingConstants,
     TrueConstants,
     reference_constants,
     true_constants,
@@ -42,6 +43,7 @@ from drip_cert.bounds.l1drac.sides import (
     sides_21a,
     sides_21b,
     sides_24,
+    sides_24_at,
 )
 from drip_cert.bounds.l1drac.verify import CONDITIONS, verify_conditions
 from drip_cert.errors import SpecError
@@ -124,8 +126,14 @@ class ConditionResult:
 
 
 def _result(eq: str, lhs: float, rhs: float) -> ConditionResult:
-    relation = RELATIONS[eq]
     margin = margin_of(eq, lhs, rhs)
+    return ConditionResult(eq, lhs, rhs, margin, _holds(eq, lhs, rhs, margin), RELATIONS[eq])
+
+
+def _holds(eq: str, lhs: float, rhs: float, margin: float) -> bool:
+    """Whether ``lhs REL rhs`` holds in floats (never with a NaN margin): the ``holds`` of
+    :class:`ConditionResult`, without building one (the searches ask only this)."""
+    relation = RELATIONS[eq]
     if relation == ">=":
         holds = lhs >= rhs
     elif relation == "<":
@@ -134,7 +142,7 @@ def _result(eq: str, lhs: float, rhs: float) -> ConditionResult:
         holds = lhs <= rhs
     if math.isnan(margin):
         holds = False
-    return ConditionResult(eq, lhs, rhs, margin, bool(holds), relation)
+    return bool(holds)
 
 
 # --------------------------------------------------------------------------------------------
@@ -224,6 +232,20 @@ def float_24(
 ) -> ConditionResult:
     """(24) in float64 (on the monotone envelope of (A.13)-(A.17) when ``envelope``)."""
     return _result("24", *sides_24(c, tc, p, omega, lambda_s, Ts, rho_r, rho_a, envelope=envelope))
+
+
+def holds_24_at(
+    c: L1Constants,
+    tc: TrueConstants,
+    s: SamplingConstants,
+    omega: float,
+    rho_r: float,
+    rho_a: float,
+) -> bool:
+    """``float_24(...).holds`` on sampling constants computed once (``s``), without building the
+    result: the oracle of the search over rho_a, asked ~10^5 times per design."""
+    lhs, rhs = sides_24_at(c, tc, s, omega, rho_r, rho_a)
+    return _holds("24", lhs, rhs, margin_of("24", lhs, rhs))
 
 
 def float_conditions(

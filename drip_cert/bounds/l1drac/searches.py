@@ -45,7 +45,7 @@ from drip_cert.bounds.l1drac.conditions import (
     float_16b,
     float_21a,
     float_21b,
-    float_24,
+    holds_24_at,
 )
 from drip_cert.bounds.l1drac.constants import L1Constants
 from drip_cert.bounds.l1drac.sides import budget_24, upsilon_sum
@@ -179,9 +179,13 @@ def min_rho_a(
     lambda_s: float | None,
     Ts: float | None,
     which: tuple[str, ...],
+    start: float | None = None,
 ) -> float | None:
-    """:func:`smallest_rho_a` on precomputed constants, arguments unchecked."""
-    out = TINY
+    """:func:`smallest_rho_a` on precomputed constants, arguments unchecked. ``start``: the
+    result of the same call with ``which`` = ``("16b", "21b")``, where the search of (24) starts
+    (pass ``which = ("24",)`` with it: the same result as all three, without repeating the
+    first two searches)."""
+    out = TINY if start is None else start
     if "16b" in which:
         lo = math.sqrt(c.eps_a / (1.0 - c.k_a))
         r = _smallest(lambda y: float_16b(c, tc, omega, y).holds, lo)
@@ -194,10 +198,9 @@ def min_rho_a(
             return None
         out = max(out, r)
     if "24" in which and Ts is not None and lambda_s is not None:
-        r = _smallest(
-            lambda y: float_24(c, tc, p, omega, lambda_s, Ts, rho_r, y).holds,
-            out,
-        )
+        # the sampling constants do not depend on rho_a: computed once for the whole search
+        s = sampling_constants(c, p, omega, Ts, lambda_s)
+        r = _smallest(lambda y: holds_24_at(c, tc, s, omega, rho_r, y), out)
         if r is None:
             return None
         out = max(out, r)

@@ -44,6 +44,7 @@ __all__ = [
     "sides_21a",
     "sides_21b",
     "sides_24",
+    "sides_24_at",
     "budget_a",
     "budget_24",
 ]
@@ -263,8 +264,22 @@ def sides_24(
     ``envelope=True`` evaluates the left side on the monotone envelope of
     :func:`~drip_cert.bounds.l1drac.appendix.sampling_constants` (the designer's Ts search).
     """
+    s = sampling_constants(c, p, omega, Ts, lambda_s, envelope=envelope)
+    return sides_24_at(c, tc, s, omega, rho_r, rho_a)
+
+
+def sides_24_at(
+    c: L1ConstantsLike,
+    tc: TrueConstants,
+    s: SamplingConstants,
+    omega: Real,
+    rho_r: Real,
+    rho_a: Real,
+) -> tuple[Real, Real]:
+    """:func:`sides_24` on sampling constants computed once (``s``: they depend on ``(p, omega,
+    lambda_s, Ts)`` only, not on the radii a search varies); the same operations in the same
+    order, so the same numbers."""
     num = c.num
     rho_r, rho_a = num.const(rho_r), num.const(rho_a)
-    s = sampling_constants(c, p, omega, Ts, lambda_s, envelope=envelope)
     lhs = upsilon_sum(rho_a + rho_r + c.Delta_star, rho_a, s)
     return lhs, budget_24(c, tc, omega, rho_r, rho_a)

@@ -24,6 +24,7 @@ its float64 margin is.
 
 from __future__ import annotations
 
+import functools
 import math
 import time
 from collections.abc import Callable
@@ -75,6 +76,26 @@ class _Point:
     reason: str
 
 
+_MEMO_SIZE = 1 << 14
+"""Entries of each memo of the radii at one omega (:func:`_rho_r_at`, :func:`_rho_a_floor`):
+more than the omegas one design visits (~ 20 front points x ~ 60 omegas)."""
+
+
+@functools.lru_cache(maxsize=_MEMO_SIZE)
+def _rho_r_at(c: L1Constants, rc: RefConstants, omega: float) -> float | None:
+    """``min_rho_r(c, rc, omega, ("16a", "21a"))``, memoised: a function of its (hashable,
+    frozen) arguments' values, which every search over lambda_s and Ts at one omega repeats."""
+    return min_rho_r(c, rc, omega, ("16a", "21a"))
+
+
+@functools.lru_cache(maxsize=_MEMO_SIZE)
+def _rho_a_floor(
+    c: L1Constants, tc: TrueConstants, p: int, omega: float, rho_r: float
+) -> float | None:
+    """``min_rho_a(..., ("16b", "21b"))`` at (omega, rho_r), memoised like :func:`_rho_r_at`."""
+    return min_rho_a(c, tc, p, omega, rho_r, None, None, ("16b", "21b"))
+
+
 def _point(
     c: L1Constants,
     rc: RefConstants,
@@ -92,7 +113,7 @@ def _point(
     if req.rho_r is not None:
         rho_r = req.rho_r
     else:
-        rho_r = min_rho_r(c, rc, omega, ("16a", "21a"))
+        rho_r = _rho_r_at(c, rc, omega)
         if rho_r is None:
             lim = 1.0 - c.k_r - (rc.oast_2 + rc.oast_3) / gap
             return _Point(
@@ -106,7 +127,11 @@ def _point(
     if req.rho_a is not None:
         rho_a = req.rho_a
     else:
-        rho_a = min_rho_a(c, tc, req.p, omega, rho_r, lambda_s, Ts, ("16b", "21b", "24"))
+        # = min_rho_a(..., ("16b", "21b", "24")); the first two searches depend on omega and
+        # rho_r only, not on the lambda_s and Ts the outer searches vary: memoised
+        rho_a = _rho_a_floor(c, tc, req.p, omega, rho_r)
+        if rho_a is not None and Ts is not None and lambda_s is not None:
+            rho_a = min_rho_a(c, tc, req.p, omega, rho_r, lambda_s, Ts, ("24",), start=rho_a)
         if rho_a is None:
             lim = 1.0 - c.k_a - (tc.oast_2 + tc.oast_3) / gap
             which = "(21b)" if Ts is None else "(21b) and (24)"

@@ -29,6 +29,7 @@ from drip_cert.analysis.growth.closed_loop import closed_loop_constants
 from drip_cert.bounds.l1drac.constants import L1Constants
 from drip_cert.bounds.l1drac.decomposition import L1Decomposition, decompose
 from drip_cert.bounds.l1drac.designer import TradeoffRow, design, tradeoff_table
+from drip_cert.bounds.l1drac.lower import rho_lower_bound
 from drip_cert.bounds.l1drac.request import DesignRequest
 from drip_cert.bounds.l1drac.result import L1Design
 from drip_cert.errors import AssumptionViolation
@@ -74,6 +75,40 @@ class L1Section:
         return out
 
 
+@dataclass(frozen=True)
+class L1Inputs:
+    """The L1-DRAC constants of a system and the design request, before the design (the costly
+    part: :func:`design_section`)."""
+
+    constants: Mapping[str, Quantity]  #: every constant, with its provenance
+    consts: L1Constants  #: the same numbers, as the designer takes them
+    request: DesignRequest
+    rho_sde: Quantity | None
+    discrete: Mapping[str, int | bool]
+
+    def rho_lower_bound(self) -> float:
+        """A lower bound on the ``rho`` of any feasible design (:func:`rho_lower_bound`)."""
+        return rho_lower_bound(self.consts, self.request.p)
+
+
+def design_section(inputs: L1Inputs) -> L1Section:
+    """Run the designer on prepared inputs: the section :func:`l1_section` returns."""
+    consts = inputs.consts
+    d = design(consts, inputs.request)
+    rows: tuple[TradeoffRow, ...] = ()
+    # a feasible design has omega and lambda_s (condition (24) was verified)
+    if d.feasible and d.omega is not None and d.lambda_s is not None:
+        rows = tradeoff_table(consts, d.p, d.omega, d.lambda_s)
+    return L1Section(
+        inputs.constants,
+        d,
+        tradeoff=rows,
+        rho_sde=inputs.rho_sde,
+        decomposition=decompose(consts, d),
+        discrete=inputs.discrete,
+    )
+
+
 def l1_section(
     s: System,
     settings: L1Settings,
@@ -84,7 +119,24 @@ def l1_section(
     input_q: Mapping[str, Quantity],
     unc_q: Mapping[str, Quantity],
 ) -> L1Section:
-    """Assemble the L1-DRAC constants of ``s`` and run the designer.
+    """Assemble the L1-DRAC constants of ``s`` and run the designer (:func:`l1_inputs`, then
+    :func:`design_section`)."""
+    inputs = l1_inputs(s, settings, given, lam, global_rate, which, input_q, unc_q)
+    return inputs if isinstance(inputs, L1Section) else design_section(inputs)
+
+
+def l1_inputs(
+    s: System,
+    settings: L1Settings,
+    given: ConstantsTable,
+    lam: Quantity,
+    global_rate: bool,
+    which: str,
+    input_q: Mapping[str, Quantity],
+    unc_q: Mapping[str, Quantity],
+) -> L1Inputs | L1Section:
+    """Assemble the L1-DRAC constants of ``s`` and the design request; a section without a
+    design when there can be none (no contraction, a constant without a finite value).
 
     Parameters
     ----------
@@ -208,16 +260,4 @@ def l1_section(
         rho_budget=st.rho_budget,
         front=st.front,
     )
-    d = design(consts, req)
-    rows: tuple[TradeoffRow, ...] = ()
-    # a feasible design has omega and lambda_s (condition (24) was verified)
-    if d.feasible and d.omega is not None and d.lambda_s is not None:
-        rows = tradeoff_table(consts, d.p, d.omega, d.lambda_s)
-    return L1Section(
-        q,
-        d,
-        tradeoff=rows,
-        rho_sde=cl.rho_sde,
-        decomposition=decompose(consts, d),
-        discrete=discrete,
-    )
+    return L1Inputs(q, consts, req, cl.rho_sde, discrete)
