@@ -147,7 +147,7 @@ def _metric(
 ) -> Any:
     """The LMI contraction metric of a closed loop on the contraction region (``kappa`` bounds
     ``cond P``; default that of :func:`~drip_cert.analysis.contraction.lmi.contraction_metric`)."""
-    from drip_cert.analysis.contraction.lmi import (  # cvxpy: keep off the API's import path
+    from drip_cert.analysis.contraction.lmi import (  # clarabel: keep off the API's import path
         DEFAULT_KAPPA,
         contraction_metric,
     )

@@ -77,10 +77,11 @@ from drip_cert.numerics.rounding import (
     matmul_bounds,
     mul_down_np,
     mul_up,
+    mul_up_np,
     norm2_up_np,
     spectral_norm_upper,
     sub_down_np,
-    sum_down,
+    sum_up_np,
     up_np,
 )
 from drip_cert.provenance import GLOBAL, How, Quantity
@@ -377,21 +378,28 @@ SUP_DIFF_RTOL = 0.1
 #: rho_TaSIL) is the same on every machine. 8000 boxes: ~3 ms each for the paper example's two
 #: 64-64 / 4-16 networks on one quiet core (~25 s), about what the former 10 s budget reached
 SUP_DIFF_MAX_BOXES = 8000
+#: sub-boxes split per round of that branch and bound (the networks enclose the round's boxes in
+#: one propagation; the round size doubles from 1 up to this, numerics/bnb.py). 16: on a 300-box
+#: budget as tight as one box at a time (1.10x the sampled sup in tests/test_learned_loop.py;
+#: 32 gives 1.27x, 64 1.39x: wide rounds spend the budget on boxes that did not need a split)
+SUP_DIFF_BATCH = 16
 
 
 def _affine_enclosure(s: System, dec: AffineBlocks, lo: np.ndarray, hi: np.ndarray):
     """Rigorous ``(lo, hi)`` of ``A x + c + sum_k C_k h_k(x)`` over the box ``[lo, hi]``
-    (centre-radius products rounded outward, the coefficient conversion radius included)."""
+    (centre-radius products rounded outward, the coefficient conversion radius included).
+    ``lo``, ``hi``: ``(..., n)``, a batch of boxes enclosed at once."""
 
     def lin(M: np.ndarray, vlo: np.ndarray, vhi: np.ndarray):
+        # x -> M x on the last axis: (..., d) @ M^T, each product enclosed by matmul_bounds
         m = 0.5 * vlo + 0.5 * vhi
         r = up_np(np.maximum(vhi - m, m - vlo))
-        clo, chi = matmul_bounds(M, m[:, None])
-        rad = matmul_bounds(np.abs(M), r[:, None])[1][:, 0]
+        clo, chi = matmul_bounds(m, M.T)
+        rad = matmul_bounds(r, np.abs(M).T)[1]
         vabs = np.maximum(np.abs(vlo), np.abs(vhi))
-        conv = matmul_bounds(CONVERSION_ULPS * np.spacing(np.abs(M)), vabs[:, None])[1][:, 0]
+        conv = matmul_bounds(vabs, (CONVERSION_ULPS * np.spacing(np.abs(M))).T)[1]
         rad = add_up_np(rad, conv)
-        return sub_down_np(clo[:, 0], rad), add_up_np(chi[:, 0], rad)
+        return sub_down_np(clo, rad), add_up_np(chi, rad)
 
     c = np.asarray(dec.c, dtype=float)
     rc = CONVERSION_ULPS * np.spacing(np.abs(c))
@@ -411,7 +419,8 @@ def _difference_jacobian_at(
 ):
     """Rigorous ``(lo, hi)`` of ``D Delta(x) = A + sum_k C_k Dh_k(x)`` at the point ``c`` or, with
     ``hi``, for every ``x`` in the box ``[c, hi]`` (each network's Jacobian enclosed by
-    :func:`~drip_cert.analysis.networks.mlp.enclose_jacobian_centred` there)."""
+    :func:`~drip_cert.analysis.networks.mlp.enclose_jacobian_centred` there). ``c``, ``hi``:
+    ``(..., n)``, a batch of points or boxes; the result has shape ``(..., n_out, n)``."""
     A = np.asarray(dec.A, dtype=float)
     ra = CONVERSION_ULPS * np.spacing(np.abs(A))
     jlo, jhi = sub_down_np(A, ra), add_up_np(A, ra)
@@ -424,7 +433,7 @@ def _difference_jacobian_at(
             hlo, hhi = enclose_jacobian_centred(mlp, c, hi)
         m = 0.5 * hlo + 0.5 * hhi
         rr = up_np(np.maximum(hhi - m, m - hlo))
-        plo, phi = matmul_bounds(C, m)
+        plo, phi = matmul_bounds(C, m)  # (out, k) @ (..., k, n): batched like @
         rad = matmul_bounds(np.abs(C), rr)[1]
         conv = matmul_bounds(
             CONVERSION_ULPS * np.spacing(np.abs(C)), np.maximum(abs(hlo), abs(hhi))
@@ -481,61 +490,60 @@ def sup_policy_difference(
     if not dec.C and box.shape[0] <= AFFINE_VERTEX_MAX_DIM:
         return _affine_sup(s, dec, box, ball)
 
-    def outside(B: np.ndarray) -> bool:
-        """Whether the sub-box ``B`` provably misses the ball (distance rounded down)."""
-        if ball is None:
-            return False
-        gap = np.maximum(np.maximum(sub_down_np(B[:, 0], bc), sub_down_np(bc, B[:, 1])), 0.0)
-        return sum_down(mul_down_np(gap, gap).tolist()) > mul_up(br, br)
-
-    def upper(B: np.ndarray) -> float:
-        if outside(B):
-            return 0.0
-        lo, hi = _affine_enclosure(s, dec, B[:, 0], B[:, 1])
-        ub = float(norm2_up_np(np.maximum(np.abs(lo), np.abs(hi))))
-        c = 0.5 * B[:, 0] + 0.5 * B[:, 1]
-        r = up_np(np.maximum(B[:, 1] - c, c - B[:, 0]))
+    def upper_many(bs: np.ndarray) -> np.ndarray:
+        """Per sub-box ``B`` of the batch ``bs`` (``(K, n, 2)``), an upper bound of the sup."""
+        blo, bhi = bs[:, :, 0], bs[:, :, 1]
+        lo, hi = _affine_enclosure(s, dec, blo, bhi)
+        ub = norm2_up_np(np.maximum(np.abs(lo), np.abs(hi)))
+        c = 0.5 * blo + 0.5 * bhi
+        r = up_np(np.maximum(bhi - c, c - blo))
         clo, chi = _affine_enclosure(s, dec, c, c)
+        cmag = np.maximum(np.abs(clo), np.abs(chi))
         # centred (interval mean-value) form, docs/math/tasil.md section 3.9: per component,
         # Delta_i(x) = Delta_i(c) + D Delta_i(z_i)(x - c) with z_i in the box, so
         # |Delta_i(x)| <= |Delta_i(c)| + sum_j max|[D Delta](box)_ij| r_j
-        blo, bhi = _difference_jacobian_at(s, dec, B[:, 0], B[:, 1])
-        spread = matmul_bounds(np.maximum(np.abs(blo), np.abs(bhi)), r[:, None])[1][:, 0]
-        centred = add_up_np(np.maximum(np.abs(clo), np.abs(chi)), spread)
-        ub = min(ub, float(norm2_up_np(centred)))
-        if not (math.isfinite(lip) or math.isfinite(l2)):
-            return ub
+        jlo, jhi = _difference_jacobian_at(s, dec, blo, bhi)
+        spread = matmul_bounds(np.maximum(np.abs(jlo), np.abs(jhi)), r[:, :, None])[1][..., 0]
+        ub = np.minimum(ub, norm2_up_np(add_up_np(cmag, spread)))
         if math.isfinite(lip):
             # first order: ||D(x)|| <= ||D(c)|| + Lip ||x - c||, D(c) enclosed at the point c
-            at_c = float(norm2_up_np(np.maximum(np.abs(clo), np.abs(chi))))
-            ub = min(ub, add_up(at_c, mul_up(lip, float(norm2_up_np(r)))))
+            ub = np.minimum(ub, add_up_np(norm2_up_np(cmag), mul_up_np(lip, norm2_up_np(r))))
         if math.isfinite(l2):
             # second order: D(x) = D(c) + DD(c)(x - c) + E, ||E|| <= L2/2 ||x - c||^2; the linear
             # part's range over the box is exact per component: D(c)_i +- sum_j |DD(c)_ij| r_j
-            jlo, jhi = _difference_jacobian_at(s, dec, c)
-            spread = matmul_bounds(np.maximum(np.abs(jlo), np.abs(jhi)), r[:, None])[1][:, 0]
+            plo, phi = _difference_jacobian_at(s, dec, c)
+            spread = matmul_bounds(np.maximum(np.abs(plo), np.abs(phi)), r[:, :, None])[1][..., 0]
             lin = np.maximum(np.abs(sub_down_np(clo, spread)), np.abs(add_up_np(chi, spread)))
-            rem = mul_up(0.5 * l2, float(norm2_up_np(r)) ** 2 * (1.0 + 4.0 * 2.0**-52))
-            ub = min(ub, add_up(float(norm2_up_np(lin)), rem))
+            r2 = norm2_up_np(r) ** 2 * (1.0 + 4.0 * 2.0**-52)
+            ub = np.minimum(ub, add_up_np(norm2_up_np(lin), mul_up_np(0.5 * l2, r2)))
+        if ball is not None:
+            # a sub-box whose distance to the ball's centre (rounded down) exceeds the radius
+            # holds no point of the set: bound 0 (the norm is >= 0)
+            gap = np.maximum(np.maximum(sub_down_np(blo, bc), sub_down_np(bc, bhi)), 0.0)
+            far = -sum_up_np(-mul_down_np(gap, gap)) > mul_up(br, br)  # a lower bound of the sum
+            ub = np.where(far, 0.0, ub)
         return ub
 
-    def value(x: np.ndarray) -> float:
-        if ball is not None and np.linalg.norm(x - bc) > br:
-            return 0.0  # a sample outside the set says nothing of its sup
-        d = dec.A @ x + dec.c
+    def value_many(xs: np.ndarray) -> np.ndarray:
+        d = xs @ dec.A.T + dec.c
         for name, C in dec.C.items():
             mlp = s.blocks[name].mlp
             assert mlp is not None
-            d = d + C @ mlp.apply_np(x[None, :])[0]
-        return float(np.linalg.norm(d))
+            d = d + mlp.apply_np(xs) @ C.T
+        v = np.linalg.norm(d, axis=-1)
+        if ball is not None:  # a sample outside the set says nothing of its sup
+            v = np.where(np.linalg.norm(xs - bc, axis=-1) > br, 0.0, v)
+        return v
 
     res = maximize(
         box,
-        upper,
-        value,
+        None,
         rtol=SUP_DIFF_RTOL,
         max_boxes=SUP_DIFF_MAX_BOXES,
         corners=True,
+        upper_many=upper_many,
+        value_many=value_many,
+        batch=SUP_DIFF_BATCH,
     )
     where = box.tolist() if ball is None else f"{box.tolist()} cap B({bc.tolist()}, {br:.6g})"
     return Quantity.derive(
