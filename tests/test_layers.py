@@ -420,7 +420,7 @@ def test_every_function_local_import_keeps_a_heavy_package_off_an_import_path():
         ("def f():\n    import matplotlib.pyplot as plt  # matplotlib: only for figures\n", ""),
         (
             "def f():\n"
-            "    from drip_cert.analysis.contraction.lmi import (  # clarabel: one function needs it\n"
+            "    from drip_cert.analysis.contraction.lmi import (  # clarabel: one function\n"
             "        contraction_metric,\n    )\n",
             "",
         ),
