@@ -129,6 +129,7 @@ def cmd_train(args: argparse.Namespace) -> int:
     summary = train_from_spec(
         args.spec,
         method=args.method,
+        architecture=args.architecture,
         trajectories=args.trajectories,
         seed=args.seed,
         out=args.out,
@@ -315,6 +316,14 @@ def build_parser() -> argparse.ArgumentParser:
         default="tasil",
         help="tasil (matches the policy's Jacobian too), bc (behaviour cloning), dagger or dart "
         "(docs/baselines.md) (default: %(default)s)",
+    )
+    q.add_argument(
+        "--architecture",
+        choices=["mlp", "residual"],
+        default=None,
+        help="policy class, overriding [tasil] architecture: mlp (a plain MLP) or residual "
+        "([policy] structure, when given, + K x + MLP); --compare trains every method in it "
+        "(default: the spec's)",
     )
     q.add_argument(
         "--trajectories",

@@ -280,6 +280,7 @@ def train_from_spec(
     max_heldout_gap: float | None = None,
     write_spec: str | Path | None = None,
     compare_all: bool = False,
+    architecture: str | None = None,
 ) -> dict[str, Any]:
     """``drip-cert train``: demonstrations, training, held-out gap, certificate; writes ``out``.
 
@@ -295,6 +296,12 @@ def train_from_spec(
     binding condition). Every file is written atomically. ``use_in_spec`` in ``train.json`` is the
     TOML that makes a spec certify this policy on these demonstrations (for a residual policy the
     learned expressions carry the structure and the learned ``K``).
+
+    ``architecture`` (``train --architecture``): the policy class, replacing ``[tasil]
+    architecture`` for every method trained (the ``compare`` ones too): ``"mlp"``, a plain MLP
+    (a ``[policy] structure`` is then not used, and ``write_spec`` drops it); ``"residual"``,
+    ``structure(x) + K x + N(x)``, where ``structure`` is 0 when the spec has none (the class
+    ``K x + N(x)``).
 
     ``compare``: train the other method (BC for TaSIL and vice versa) on the same demonstrations
     and budget and report both held-out gaps. ``compare_all`` (``train --compare``): train every
@@ -332,6 +339,8 @@ def train_from_spec(
             "method": method,
             "steps": steps0 * 2**r,
         }
+        if architecture is not None:
+            over["architecture"] = architecture
         run = run_pipeline(
             spec,
             seed=seed,
@@ -427,8 +436,14 @@ def train_from_spec(
     }
     if write_spec is not None:
         assert spec.path is not None  # checked before the training
+        doc_in = dict(read_document(spec.path))
+        tasil_keys: dict[str, Any] = {}
+        if architecture is not None:  # the class trained, not the file's
+            tasil_keys["architecture"] = architecture
+            if architecture == "mlp" and "structure" in (doc_in.get("policy") or {}):
+                doc_in["policy"] = {k: v for k, v in doc_in["policy"].items() if k != "structure"}
         doc = spec_with_policy(
-            read_document(spec.path),
+            doc_in,
             source=spec.path,
             target=write_spec,
             block="pi_il",
@@ -440,6 +455,7 @@ def train_from_spec(
             },
             learned=learned,
             tasil={
+                **tasil_keys,
                 "method": method,
                 "seed": seed,
                 "trajectories": trajectories,
@@ -486,6 +502,8 @@ def method_rows(run: PipelineResult, *, certify: bool = True) -> dict[str, dict[
             row.update(
                 verdict=b["verdict"],
                 tasil_verdict=parts.get("tasil", {}).get("verdict"),
+                contraction_verdict=parts.get("contraction", {}).get("verdict"),
+                l1drac_verdict=parts.get("l1drac", {}).get("verdict"),
                 rho=_json_safe(cert.rho),
                 rho_tasil=b["rho_tasil"],
                 rho_l1=b["rho_l1"],
