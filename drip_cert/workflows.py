@@ -350,7 +350,8 @@ def train_from_spec(
             certify=certify,
             progress=progress,
         )
-        binding = _binding(run.certificate) if run.certificate is not None else None
+        arch = architecture or run.spec.settings.tasil.architecture
+        binding = _binding(run.certificate, arch) if run.certificate is not None else None
         rounds.append({"steps": over["steps"], "binding": binding})
         if not until_certified or binding is None or binding["certified"]:
             break
@@ -497,7 +498,7 @@ def method_rows(run: PipelineResult, *, certify: bool = True) -> dict[str, dict[
             cert = run.certificate if m == first else None
             if cert is None:
                 cert = _certify(run.spec.with_system(tp.system), demonstrations=run.demonstrations)
-            b = _binding(cert)
+            b = _binding(cert, tp.settings.architecture)
             parts = cert.part_verdicts()
             row.update(
                 verdict=b["verdict"],
@@ -569,7 +570,7 @@ def export_policy(
     }
 
 
-def _binding(cert: Certificate) -> dict[str, Any]:
+def _binding(cert: Certificate, architecture: str = "mlp") -> dict[str, Any]:
     """The certificate's verdict and binding condition, in the coordinates the certificate uses.
 
     The binding condition is the first check that fails; else (a conditional verdict) the first
@@ -615,7 +616,7 @@ def _binding(cert: Certificate) -> dict[str, Any]:
         + f" in {coords}: "
         + (inner["text"] if inner is not None else why)
     )
-    change = _what_to_change(cert, c.id, role, inner)
+    change = _what_to_change(cert, c.id, role, inner, architecture)
     # the TaSIL part's own binding inequality, also when another part's check comes first
     t_fail = next((t for t in cert.assumptions if t.id == "TaSIL" and not t.holds), None)
     t_inner = _tasil_binding(cert) if t_fail is not None else None
@@ -626,7 +627,7 @@ def _binding(cert: Certificate) -> dict[str, Any]:
             "check": t_inner["check"],
             "margin": _json_safe(t_inner["margin"]),
             "text": t_inner["text"],
-            "change": _what_to_change(cert, "TaSIL", "fails", t_inner),
+            "change": _what_to_change(cert, "TaSIL", "fails", t_inner, architecture),
         }
     )
     return {
@@ -667,7 +668,13 @@ def _tasil_binding(cert: Certificate) -> dict[str, Any] | None:
     }
 
 
-def _what_to_change(cert: Certificate, cid: str, role: str, inner: dict[str, Any] | None) -> str:
+def _what_to_change(
+    cert: Certificate,
+    cid: str,
+    role: str,
+    inner: dict[str, Any] | None,
+    architecture: str = "mlp",
+) -> str:
     """What would move the binding check (empty when nothing training can do is known)."""
     if role == "tightest":
         return ""
@@ -701,11 +708,16 @@ def _what_to_change(cert: Certificate, cid: str, role: str, inner: dict[str, Any
         if i.endswith((".R", ".eta")):
             return "a larger tube radius ([tasil] tube_radius) or a smaller h0"
     if cid in ("L1DRAC-A2", "L1DRAC-A7"):
+        if role != "not proved":
+            return "a learned loop that contracts: a smaller [tasil] lipschitz_budget"
+        if architecture == "residual":
+            return (
+                "a learned loop proved to contract for all x: a smaller [tasil] "
+                "lipschitz_budget (the residual network's share of the loop's Jacobian)"
+            )
         return (
             "a learned loop proved to contract for all x: a smaller [tasil] lipschitz_budget, "
-            "or the residual architecture whose loop is proved globally"
-            if role == "not proved"
-            else "a learned loop that contracts: a smaller [tasil] lipschitz_budget"
+            "or the residual architecture whose loop is proved globally (--architecture residual)"
         )
     if role == "not proved" and cid == "TaSIL":
         return "sound inputs: see the TaSIL part's provenance for the estimate it rests on"

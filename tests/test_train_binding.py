@@ -126,3 +126,16 @@ def test_the_tasil_inequality_is_reported_when_another_part_fails_first():
     tb = b["tasil_binding"]
     assert tb["check"] == "tasil.sharp.b" and tb["margin"] == -3.66
     assert "smaller Jacobian error" in tb["change"] and "h1 <= 0.6369" in tb["change"]
+
+
+def test_the_advice_for_an_unproved_learned_loop_follows_the_policy_class():
+    """A residual policy is not told to try the residual architecture (it is one)."""
+    from types import SimpleNamespace
+
+    from drip_cert.workflows import _what_to_change
+
+    cert = SimpleNamespace(tasil=None)
+    plain = _what_to_change(cert, "L1DRAC-A2", "not proved", None, "mlp")  # type: ignore[arg-type]
+    resid = _what_to_change(cert, "L1DRAC-A2", "not proved", None, "residual")  # type: ignore[arg-type]
+    assert "residual architecture" in plain and "lipschitz_budget" in plain
+    assert "residual architecture" not in resid and "lipschitz_budget" in resid
