@@ -16,6 +16,7 @@ closed loops from the same initial states, the same integrator, and per trajecto
 
 from __future__ import annotations
 
+import math
 import sys
 import time
 from collections.abc import Callable, Sequence
@@ -30,7 +31,14 @@ from tqdm.auto import tqdm
 from drip_cert._jax import jax, jnp
 from drip_cert.errors import SpecError
 from drip_cert.learn.data import DEFAULT_SUBSTEPS, Demonstrations, simulate_closed_loop
-from drip_cert.learn.losses import LossSpec, Targets, expert_targets, imitation_loss
+from drip_cert.learn.losses import (
+    LossSpec,
+    Targets,
+    expert_targets,
+    imitation_loss,
+    tube_jacobian_loss,
+    tube_points,
+)
 from drip_cert.model.activations import get_activation
 from drip_cert.model.mlp import ACTIVATIONS, MLP, apply_params, init_mlp, mlp_from_params
 
@@ -64,6 +72,9 @@ class TrainSettings:
     reduction: str = "mean"
     skip: bool = False
     lipschitz_budget: float = float("inf")
+    tube_jacobian_weight: float = 0.0
+    tube_points: int = 128
+    tube_radius: float = 1.0
 
     @staticmethod
     def _known(name: str) -> bool:
@@ -111,6 +122,22 @@ class TrainSettings:
             raise SpecError(
                 f"lipschitz_budget must be > 0 (inf: none), got {self.lipschitz_budget!r}",
                 field="lipschitz_budget",
+            )
+        if not (math.isfinite(self.tube_jacobian_weight) and self.tube_jacobian_weight >= 0):
+            raise SpecError(
+                f"tube_jacobian_weight must be finite and >= 0 (0: off), "
+                f"got {self.tube_jacobian_weight!r}",
+                field="tube_jacobian_weight",
+            )
+        if int(self.tube_points) != self.tube_points or self.tube_points < 1:
+            raise SpecError(
+                f"tube_points must be a positive integer, got {self.tube_points!r}",
+                field="tube_points",
+            )
+        if not (math.isfinite(self.tube_radius) and self.tube_radius >= 0):
+            raise SpecError(
+                f"tube_radius must be finite and >= 0, got {self.tube_radius!r}",
+                field="tube_radius",
             )
         if not (0.0 <= self.val_fraction < 1.0):
             raise SpecError(
@@ -215,6 +242,9 @@ def train_policy(
     output_activation: str | None = None,
     skip: bool = False,
     lipschitz_budget: float = float("inf"),
+    tube_jacobian_weight: float = 0.0,
+    tube_points: int = 128,
+    tube_radius: float = 1.0,
 ) -> TrainResult:
     """Train an MLP policy on expert demonstrations by TaSIL (DRIP eq. (LossTaSIL)) or BC.
 
@@ -262,6 +292,15 @@ def train_policy(
         of spectral norms -- an upper bound of the network's Lipschitz constant for 1-Lipschitz
         activations -- stays within the budget (up to float rounding; the certificate re-bounds
         it rigorously). ``inf``: no constraint.
+    tube_jacobian_weight, tube_points, tube_radius
+        Weight ``w`` of the Jacobian matching on the tube (docs/math/tasil.md section 5,
+        :func:`~drip_cert.learn.losses.tube_jacobian_loss`): each step adds
+        ``w mean_j ||d pi_hat(y_j) - d pi*(y_j)||_F`` over ``tube_points`` points ``y_j`` drawn
+        within ``tube_radius`` (sup norm) of uniformly chosen training states, from a key of
+        their own (``fold_in`` of the seed's key: same seed, same points). Only the optimiser's
+        objective changes; the recorded training and held-out losses (early stopping) stay the
+        imitation loss. ``0`` (default): no term, no draw, the training of earlier versions bit
+        for bit. Behaviour cloning (order 0) ignores the term.
 
     Returns
     -------
@@ -287,6 +326,9 @@ def train_policy(
         reduction=reduction,
         skip=skip,
         lipschitz_budget=lipschitz_budget,
+        tube_jacobian_weight=tube_jacobian_weight,
+        tube_points=tube_points,
+        tube_radius=tube_radius,
     )
     if not isinstance(demos, Demonstrations):
         raise SpecError(
@@ -328,12 +370,23 @@ def train_policy(
     params = net.project(params)
     opt_state = _adam(*lr_args, settings.schedule).init(params)
     key = jax.random.PRNGKey(seed)
+    tube = None
+    tube_states = jnp.zeros((0, demos.state_dim))
+    if settings.tube_jacobian_weight > 0 and spec.order >= 1:  # TaSIL only: BC stays BC
+        tube = _Tube(
+            settings.tube_jacobian_weight,
+            settings.tube_points,
+            settings.tube_radius,
+            expert_jac if expert_jac is not None else jax.jacrev(expert),
+            spec.floor,
+        )
+        tube_states = train_t.states.reshape(-1, demos.state_dim)
 
     def run_chunk(params, opt_state, step0, n_steps):
         return _run_chunk(
-            params, opt_state, key, jnp.asarray(step0), pool, lr_args, net=net, spec=spec,
-            schedule=settings.schedule,
-            n_steps=n_steps, batch_size=batch_size, axis=axis,
+            params, opt_state, key, jnp.asarray(step0), pool, lr_args, tube_states, net=net,
+            spec=spec, schedule=settings.schedule,
+            n_steps=n_steps, batch_size=batch_size, axis=axis, tube=tube,
         )  # fmt: skip
 
     def eval_loss(p, targets):
@@ -422,6 +475,28 @@ class _Net:
         return (out, K) if self.skip else out
 
 
+@dataclass(frozen=True)
+class _Tube:
+    """Static description of the tube's Jacobian-matching term (hashable, for jit caching): its
+    weight, points per step, radius, the expert's Jacobian ``x -> (m, n)`` and the norm floor."""
+
+    weight: float
+    count: int
+    radius: float
+    expert_jac: Callable
+    floor: float
+
+    def loss(self, policy: Callable, key, states):
+        """``weight * mean_j ||d policy(y_j) - d pi*(y_j)||_F`` at ``count`` points drawn from
+        ``key`` on the tube around ``states``."""
+        pts = tube_points(key, states, self.count, self.radius)
+        return self.weight * tube_jacobian_loss(policy, self.expert_jac, pts, self.floor)
+
+
+#: stream of the tube's draws, folded into the seed's key (the mini-batches use the step itself)
+TUBE_STREAM = 0x7B0E
+
+
 def _skip_init(layers, states, actions):
     """``(layers, K)``: ``K`` from the least-squares fit ``u ~ K x + c`` of the training pairs
     (``c`` added to the output bias); the network starts at its seeded initialisation, so the
@@ -454,25 +529,35 @@ def _eval_loss(params, targets: Targets, *, net: _Net, spec):
     return imitation_loss(net.policy(params), targets, spec)
 
 
-@partial(jax.jit, static_argnames=("net", "spec", "schedule", "n_steps", "batch_size", "axis"))
+@partial(
+    jax.jit,
+    static_argnames=("net", "spec", "schedule", "n_steps", "batch_size", "axis", "tube"),
+)
 def _run_chunk(
-    params, opt_state, key, step0, pool: Targets, lr_args: tuple[jax.Array, jax.Array], *, net,
-    spec, schedule, n_steps, batch_size, axis,
+    params, opt_state, key, step0, pool: Targets, lr_args: tuple[jax.Array, jax.Array],
+    tube_states, *, net, spec, schedule, n_steps, batch_size, axis, tube: _Tube | None = None,
 ):  # fmt: skip
     """``n_steps`` Adam steps on seeded mini-batches drawn without replacement from ``pool``
-    along ``axis`` (states for the mean reduction, trajectories for the max reduction)."""
+    along ``axis`` (states for the mean reduction, trajectories for the max reduction); with
+    ``tube``, plus its Jacobian-matching term at points drawn around ``tube_states``."""
     opt = _adam(*lr_args, schedule)
     pool_size = pool.states.shape[axis]
+    tube_key = jax.random.fold_in(key, TUBE_STREAM)
 
-    def loss_of(p, targets):
-        return imitation_loss(net.policy(p), targets, spec)
+    def loss_of(p, targets, step):
+        value = imitation_loss(net.policy(p), targets, spec)
+        if tube is not None:
+            value = value + tube.loss(
+                net.policy(p), jax.random.fold_in(tube_key, step), tube_states
+            )
+        return value
 
     def body(carry, step):
         p, s = carry
         idx = jax.random.choice(
             jax.random.fold_in(key, step), pool_size, (batch_size,), replace=False
         )
-        value, grads = jax.value_and_grad(loss_of)(p, _take_axis(pool, idx, axis))
+        value, grads = jax.value_and_grad(loss_of)(p, _take_axis(pool, idx, axis), step)
         updates, s = opt.update(grads, s, p)
         return (net.project(optax.apply_updates(p, updates)), s), value
 
