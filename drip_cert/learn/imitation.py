@@ -221,7 +221,7 @@ def train_on_system(
             progress=progress,
             skip=residual,
             lipschitz_budget=settings.lipschitz_budget,
-            tube_jacobian_weight=settings.tube_jacobian_weight,
+            tube_weight=settings.tube_weight,
             tube_points=settings.tube_points,
             # the margin of the certificate's box for L_Delta (bounds/tasil/section.py)
             tube_radius=settings.tube_radius if math.isfinite(settings.tube_radius) else 1.0,

@@ -36,7 +36,7 @@ from drip_cert.learn.losses import (
     Targets,
     expert_targets,
     imitation_loss,
-    tube_jacobian_loss,
+    tube_loss,
     tube_points,
 )
 from drip_cert.model.activations import get_activation
@@ -72,7 +72,7 @@ class TrainSettings:
     reduction: str = "mean"
     skip: bool = False
     lipschitz_budget: float = float("inf")
-    tube_jacobian_weight: float = 0.0
+    tube_weight: float = 0.0
     tube_points: int = 128
     tube_radius: float = 1.0
 
@@ -123,11 +123,10 @@ class TrainSettings:
                 f"lipschitz_budget must be > 0 (inf: none), got {self.lipschitz_budget!r}",
                 field="lipschitz_budget",
             )
-        if not (math.isfinite(self.tube_jacobian_weight) and self.tube_jacobian_weight >= 0):
+        if not (math.isfinite(self.tube_weight) and self.tube_weight >= 0):
             raise SpecError(
-                f"tube_jacobian_weight must be finite and >= 0 (0: off), "
-                f"got {self.tube_jacobian_weight!r}",
-                field="tube_jacobian_weight",
+                f"tube_weight must be finite and >= 0 (0: off), got {self.tube_weight!r}",
+                field="tube_weight",
             )
         if int(self.tube_points) != self.tube_points or self.tube_points < 1:
             raise SpecError(
@@ -242,7 +241,7 @@ def train_policy(
     output_activation: str | None = None,
     skip: bool = False,
     lipschitz_budget: float = float("inf"),
-    tube_jacobian_weight: float = 0.0,
+    tube_weight: float = 0.0,
     tube_points: int = 128,
     tube_radius: float = 1.0,
 ) -> TrainResult:
@@ -292,12 +291,13 @@ def train_policy(
         of spectral norms -- an upper bound of the network's Lipschitz constant for 1-Lipschitz
         activations -- stays within the budget (up to float rounding; the certificate re-bounds
         it rigorously). ``inf``: no constraint.
-    tube_jacobian_weight, tube_points, tube_radius
-        Weight ``w`` of the Jacobian matching on the tube (docs/math/tasil.md section 5,
-        :func:`~drip_cert.learn.losses.tube_jacobian_loss`): each step adds
-        ``w mean_j ||d pi_hat(y_j) - d pi*(y_j)||_F`` over ``tube_points`` points ``y_j`` drawn
-        within ``tube_radius`` (sup norm) of uniformly chosen training states, from a key of
-        their own (``fold_in`` of the seed's key: same seed, same points). Only the optimiser's
+    tube_weight, tube_points, tube_radius
+        Weight ``w`` of the matching on the tube (docs/math/tasil.md section 5.1,
+        :func:`~drip_cert.learn.losses.tube_loss`): each step adds
+        ``w mean_j (||pi_hat(y_j) - pi*(y_j)|| + ||d pi_hat(y_j) - d pi*(y_j)||_F)`` over
+        ``tube_points`` points ``y_j`` drawn uniformly on the box of the training states enlarged
+        by ``tube_radius``, from a key of their own (``fold_in`` of the seed's key: same seed,
+        same points). Only the optimiser's
         objective changes; the recorded training and held-out losses (early stopping) stay the
         imitation loss. ``0`` (default): no term, no draw, the training of earlier versions bit
         for bit. Behaviour cloning (order 0) ignores the term.
@@ -326,7 +326,7 @@ def train_policy(
         reduction=reduction,
         skip=skip,
         lipschitz_budget=lipschitz_budget,
-        tube_jacobian_weight=tube_jacobian_weight,
+        tube_weight=tube_weight,
         tube_points=tube_points,
         tube_radius=tube_radius,
     )
@@ -371,20 +371,23 @@ def train_policy(
     opt_state = _adam(*lr_args, settings.schedule).init(params)
     key = jax.random.PRNGKey(seed)
     tube = None
-    tube_states = jnp.zeros((0, demos.state_dim))
-    if settings.tube_jacobian_weight > 0 and spec.order >= 1:  # TaSIL only: BC stays BC
+    tube_box = jnp.zeros((2, demos.state_dim))
+    if settings.tube_weight > 0 and spec.order >= 1:  # TaSIL only: BC stays BC
         tube = _Tube(
-            settings.tube_jacobian_weight,
+            settings.tube_weight,
             settings.tube_points,
-            settings.tube_radius,
+            expert,
             expert_jac if expert_jac is not None else jax.jacrev(expert),
             spec.floor,
         )
-        tube_states = train_t.states.reshape(-1, demos.state_dim)
+        flat = train_t.states.reshape(-1, demos.state_dim)
+        tube_box = jnp.stack(
+            [flat.min(axis=0) - settings.tube_radius, flat.max(axis=0) + settings.tube_radius]
+        )
 
     def run_chunk(params, opt_state, step0, n_steps):
         return _run_chunk(
-            params, opt_state, key, jnp.asarray(step0), pool, lr_args, tube_states, net=net,
+            params, opt_state, key, jnp.asarray(step0), pool, lr_args, tube_box, net=net,
             spec=spec, schedule=settings.schedule,
             n_steps=n_steps, batch_size=batch_size, axis=axis, tube=tube,
         )  # fmt: skip
@@ -477,20 +480,20 @@ class _Net:
 
 @dataclass(frozen=True)
 class _Tube:
-    """Static description of the tube's Jacobian-matching term (hashable, for jit caching): its
-    weight, points per step, radius, the expert's Jacobian ``x -> (m, n)`` and the norm floor."""
+    """Static description of the tube's matching term (hashable, for jit caching): its weight,
+    points per step, the expert and its Jacobian ``x -> (m, n)``, and the norm floor."""
 
     weight: float
     count: int
-    radius: float
+    expert: Callable
     expert_jac: Callable
     floor: float
 
-    def loss(self, policy: Callable, key, states):
-        """``weight * mean_j ||d policy(y_j) - d pi*(y_j)||_F`` at ``count`` points drawn from
-        ``key`` on the tube around ``states``."""
-        pts = tube_points(key, states, self.count, self.radius)
-        return self.weight * tube_jacobian_loss(policy, self.expert_jac, pts, self.floor)
+    def loss(self, policy: Callable, key, box):
+        """``weight * mean_j (||policy(y_j) - pi*(y_j)|| + ||d policy(y_j) - d pi*(y_j)||_F)``
+        at ``count`` points drawn from ``key`` uniformly on ``box`` ``(2, n)``."""
+        pts = tube_points(key, box[0], box[1], self.count)
+        return self.weight * tube_loss(policy, self.expert, self.expert_jac, pts, self.floor)
 
 
 #: stream of the tube's draws, folded into the seed's key (the mini-batches use the step itself)
@@ -535,11 +538,11 @@ def _eval_loss(params, targets: Targets, *, net: _Net, spec):
 )
 def _run_chunk(
     params, opt_state, key, step0, pool: Targets, lr_args: tuple[jax.Array, jax.Array],
-    tube_states, *, net, spec, schedule, n_steps, batch_size, axis, tube: _Tube | None = None,
+    tube_box, *, net, spec, schedule, n_steps, batch_size, axis, tube: _Tube | None = None,
 ):  # fmt: skip
     """``n_steps`` Adam steps on seeded mini-batches drawn without replacement from ``pool``
     along ``axis`` (states for the mean reduction, trajectories for the max reduction); with
-    ``tube``, plus its Jacobian-matching term at points drawn around ``tube_states``."""
+    ``tube``, plus its matching term at points drawn on ``tube_box`` ``(2, n)``."""
     opt = _adam(*lr_args, schedule)
     pool_size = pool.states.shape[axis]
     tube_key = jax.random.fold_in(key, TUBE_STREAM)
@@ -547,9 +550,7 @@ def _run_chunk(
     def loss_of(p, targets, step):
         value = imitation_loss(net.policy(p), targets, spec)
         if tube is not None:
-            value = value + tube.loss(
-                net.policy(p), jax.random.fold_in(tube_key, step), tube_states
-            )
+            value = value + tube.loss(net.policy(p), jax.random.fold_in(tube_key, step), tube_box)
         return value
 
     def body(carry, step):

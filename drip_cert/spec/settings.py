@@ -875,10 +875,10 @@ class TasilSettings:
     max_heldout_gap: float = setting(
         math.inf, "training fails when the held-out mean gap exceeds this", positive_or_inf
     )
-    tube_jacobian_weight: float = setting(
+    tube_weight: float = setting(
         0.0,
-        "weight of Jacobian matching at points drawn within tube_radius (1 when inf) of the "
-        "training states (docs/math/tasil.md section 5); 0: off",
+        "weight of value and Jacobian matching at points drawn on the box of the training "
+        "states enlarged by tube_radius (1 when inf) (docs/math/tasil.md section 5.1); 0: off",
         nonneg_float,
     )
     tube_points: int = setting(128, "points drawn on the tube per training step", positive_int)
