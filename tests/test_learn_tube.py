@@ -125,6 +125,10 @@ def test_weight_zero_leaves_training_unchanged(demos):
     assert base.history == zero.history
     on = train_policy(demos, expert, seed=1, tube_weight=1.0, **SMALL)
     assert not np.array_equal(_weights(base)[0], _weights(on)[0])
+    # the recorded losses (early stopping, the restored step) carry the term: same initial
+    # network, a larger loss by the term at the fixed evaluation points
+    assert on.history.train_loss[0] > base.history.train_loss[0]
+    assert on.history.val_loss[0] > base.history.val_loss[0]
 
 
 def test_training_with_the_term_is_deterministic(demos):

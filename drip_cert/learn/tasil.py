@@ -37,8 +37,8 @@ from drip_cert.learn.losses import (
     expert_targets,
     imitation_loss,
     tube_loss,
-    tube_points,
 )
+from drip_cert.learn.losses import tube_points as draw_tube_points
 from drip_cert.model.activations import get_activation
 from drip_cert.model.mlp import ACTIVATIONS, MLP, apply_params, init_mlp, mlp_from_params
 
@@ -297,10 +297,10 @@ def train_policy(
         ``w mean_j (||pi_hat(y_j) - pi*(y_j)|| + ||d pi_hat(y_j) - d pi*(y_j)||_F)`` over
         ``tube_points`` points ``y_j`` drawn uniformly on the box of the training states enlarged
         by ``tube_radius``, from a key of their own (``fold_in`` of the seed's key: same seed,
-        same points). Only the optimiser's
-        objective changes; the recorded training and held-out losses (early stopping) stay the
-        imitation loss. ``0`` (default): no term, no draw, the training of earlier versions bit
-        for bit. Behaviour cloning (order 0) ignores the term.
+        same points). The recorded training and held-out losses (early stopping, the restored
+        step) add the term at a fixed draw of ``TUBE_EVAL_POINTS`` points. ``0`` (default): no
+        term, no draw, the training of earlier versions bit for bit. Behaviour cloning (order 0)
+        ignores the term.
 
     Returns
     -------
@@ -392,8 +392,24 @@ def train_policy(
             n_steps=n_steps, batch_size=batch_size, axis=axis, tube=tube,
         )  # fmt: skip
 
+    # with the tube term, the recorded losses (and so early stopping and the restored step) add
+    # the term at a fixed draw of points, the same for every evaluation
+    eval_points = (
+        None
+        if tube is None
+        else draw_tube_points(
+            jax.random.fold_in(jax.random.PRNGKey(seed), TUBE_EVAL_STREAM),
+            tube_box[0],
+            tube_box[1],
+            TUBE_EVAL_POINTS,
+        )
+    )
+
     def eval_loss(p, targets):
-        return _eval_loss(p, targets, net=net, spec=spec)
+        value = _eval_loss(p, targets, net=net, spec=spec)
+        if tube is not None:
+            value = value + _eval_tube(p, eval_points, net=net, tube=tube)
+        return value
 
     hist_steps, hist_train, hist_val = [], [], []
 
@@ -492,12 +508,15 @@ class _Tube:
     def loss(self, policy: Callable, key, box):
         """``weight * mean_j (||policy(y_j) - pi*(y_j)|| + ||d policy(y_j) - d pi*(y_j)||_F)``
         at ``count`` points drawn from ``key`` uniformly on ``box`` ``(2, n)``."""
-        pts = tube_points(key, box[0], box[1], self.count)
+        pts = draw_tube_points(key, box[0], box[1], self.count)
         return self.weight * tube_loss(policy, self.expert, self.expert_jac, pts, self.floor)
 
 
 #: stream of the tube's draws, folded into the seed's key (the mini-batches use the step itself)
 TUBE_STREAM = 0x7B0E
+#: stream and count of the fixed tube points added to the recorded (early-stopping) losses
+TUBE_EVAL_STREAM = 0x7B0F
+TUBE_EVAL_POINTS = 1024
 
 
 def _skip_init(layers, states, actions):
@@ -525,6 +544,13 @@ def _adam(lr, total_steps, schedule: str) -> optax.GradientTransformation:
         return lr * 0.5 * (1.0 + jnp.cos(jnp.pi * frac))
 
     return optax.adam(step_size)
+
+
+@partial(jax.jit, static_argnames=("net", "tube"))
+def _eval_tube(params, points, *, net: _Net, tube: _Tube):
+    return tube.weight * tube_loss(
+        net.policy(params), tube.expert, tube.expert_jac, points, tube.floor
+    )
 
 
 @partial(jax.jit, static_argnames=("net", "spec"))
