@@ -11,6 +11,7 @@ learned system.
 from __future__ import annotations
 
 import dataclasses
+import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -220,6 +221,10 @@ def train_on_system(
             progress=progress,
             skip=residual,
             lipschitz_budget=settings.lipschitz_budget,
+            tube_weight=settings.tube_weight,
+            tube_points=settings.tube_points,
+            # the margin of the certificate's box for L_Delta (bounds/tasil/section.py)
+            tube_radius=settings.tube_radius if math.isfinite(settings.tube_radius) else 1.0,
         )
         net = res.policy()
         if base is None:

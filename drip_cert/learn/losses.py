@@ -22,6 +22,19 @@ Two reductions over the training states:
   left out and the two reductions agree on a single state.
 
 Behaviour cloning (BC) is order 0: ``e_0`` only.
+
+**Matching on the tube** (:func:`tube_points`, :func:`tube_loss`): the certificate needs
+``||Delta||`` and ``||d_x Delta||`` small along the expert trajectories of NEW initial states
+(their sups ``h_0, h_1``, whose held-out thresholds are 1.25 x the training maxima) and the
+curvature of ``Delta`` small on the whole box ``B`` around the demonstrations (its ``L_Delta``,
+docs/math/tasil.md 3.12), not only at the demonstrated states, which crowd near the equilibrium.
+An optional term adds, with weight ``w``, the first-order error at points ``y_j`` drawn uniformly
+on the box of the training states enlarged by the tube radius ``r``:
+
+    L_tube = w * mean_j (||pi_hat(y_j) - pi*(y_j)|| + ||d_x pi_hat(y_j) - d_x pi*(y_j)||_F)
+
+(docs/math/tasil.md section 5.1). It is minimal (every norm at its floor) exactly when the values
+and the Jacobians agree at every drawn point.
 """
 
 from __future__ import annotations
@@ -208,3 +221,26 @@ def imitation_loss(policy: Callable, targets: Targets, spec: LossSpec):
     if spec.order >= 2:
         per_traj = per_traj + spec.lambda_h * jnp.max(e2, axis=1)
     return jnp.mean(per_traj)
+
+
+def tube_points(key, lo, hi, count: int):
+    """``count`` points drawn uniformly on the box ``[lo, hi]`` (arrays ``(n,)``), from ``key``
+    alone (same key, same points)."""
+    u = jax.random.uniform(key, (count, lo.shape[-1]), dtype=lo.dtype)
+    return lo + (hi - lo) * u
+
+
+def tube_loss(policy: Callable, expert: Callable, expert_jac: Callable, points, floor: float):
+    """``mean_j (||policy(y_j) - pi*(y_j)|| + ||d policy(y_j) - d pi*(y_j)||_F)`` over ``points``
+    ``(M, n)``: TaSIL's first-order error at points off the demonstrations (module docstring),
+    without its weight. Each norm is :func:`safe_norm` with ``floor``, so the value is ``2 floor``
+    exactly where the values and the Jacobians agree at every point, and its gradient is finite
+    everywhere.
+    """
+
+    def one(y):
+        e0 = safe_norm(policy(y) - expert(y), floor)
+        e1 = safe_norm(jax.jacrev(policy)(y) - expert_jac(y), floor)
+        return e0 + e1
+
+    return jnp.mean(jax.vmap(one)(points))

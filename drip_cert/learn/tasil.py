@@ -16,6 +16,7 @@ closed loops from the same initial states, the same integrator, and per trajecto
 
 from __future__ import annotations
 
+import math
 import sys
 import time
 from collections.abc import Callable, Sequence
@@ -30,7 +31,14 @@ from tqdm.auto import tqdm
 from drip_cert._jax import jax, jnp
 from drip_cert.errors import SpecError
 from drip_cert.learn.data import DEFAULT_SUBSTEPS, Demonstrations, simulate_closed_loop
-from drip_cert.learn.losses import LossSpec, Targets, expert_targets, imitation_loss
+from drip_cert.learn.losses import (
+    LossSpec,
+    Targets,
+    expert_targets,
+    imitation_loss,
+    tube_loss,
+)
+from drip_cert.learn.losses import tube_points as draw_tube_points
 from drip_cert.model.activations import get_activation
 from drip_cert.model.mlp import ACTIVATIONS, MLP, apply_params, init_mlp, mlp_from_params
 
@@ -64,6 +72,9 @@ class TrainSettings:
     reduction: str = "mean"
     skip: bool = False
     lipschitz_budget: float = float("inf")
+    tube_weight: float = 0.0
+    tube_points: int = 128
+    tube_radius: float = 1.0
 
     @staticmethod
     def _known(name: str) -> bool:
@@ -111,6 +122,21 @@ class TrainSettings:
             raise SpecError(
                 f"lipschitz_budget must be > 0 (inf: none), got {self.lipschitz_budget!r}",
                 field="lipschitz_budget",
+            )
+        if not (math.isfinite(self.tube_weight) and self.tube_weight >= 0):
+            raise SpecError(
+                f"tube_weight must be finite and >= 0 (0: off), got {self.tube_weight!r}",
+                field="tube_weight",
+            )
+        if int(self.tube_points) != self.tube_points or self.tube_points < 1:
+            raise SpecError(
+                f"tube_points must be a positive integer, got {self.tube_points!r}",
+                field="tube_points",
+            )
+        if not (math.isfinite(self.tube_radius) and self.tube_radius >= 0):
+            raise SpecError(
+                f"tube_radius must be finite and >= 0, got {self.tube_radius!r}",
+                field="tube_radius",
             )
         if not (0.0 <= self.val_fraction < 1.0):
             raise SpecError(
@@ -215,6 +241,9 @@ def train_policy(
     output_activation: str | None = None,
     skip: bool = False,
     lipschitz_budget: float = float("inf"),
+    tube_weight: float = 0.0,
+    tube_points: int = 128,
+    tube_radius: float = 1.0,
 ) -> TrainResult:
     """Train an MLP policy on expert demonstrations by TaSIL (DRIP eq. (LossTaSIL)) or BC.
 
@@ -262,6 +291,16 @@ def train_policy(
         of spectral norms -- an upper bound of the network's Lipschitz constant for 1-Lipschitz
         activations -- stays within the budget (up to float rounding; the certificate re-bounds
         it rigorously). ``inf``: no constraint.
+    tube_weight, tube_points, tube_radius
+        Weight ``w`` of the matching on the tube (docs/math/tasil.md section 5.1,
+        :func:`~drip_cert.learn.losses.tube_loss`): each step adds
+        ``w mean_j (||pi_hat(y_j) - pi*(y_j)|| + ||d pi_hat(y_j) - d pi*(y_j)||_F)`` over
+        ``tube_points`` points ``y_j`` drawn uniformly on the box of the training states enlarged
+        by ``tube_radius``, from a key of their own (``fold_in`` of the seed's key: same seed,
+        same points). The recorded training and held-out losses (early stopping, the restored
+        step) add the term at a fixed draw of ``TUBE_EVAL_POINTS`` points. ``0`` (default): no
+        term, no draw, the training of earlier versions bit for bit. Behaviour cloning (order 0)
+        ignores the term.
 
     Returns
     -------
@@ -287,6 +326,9 @@ def train_policy(
         reduction=reduction,
         skip=skip,
         lipschitz_budget=lipschitz_budget,
+        tube_weight=tube_weight,
+        tube_points=tube_points,
+        tube_radius=tube_radius,
     )
     if not isinstance(demos, Demonstrations):
         raise SpecError(
@@ -328,16 +370,46 @@ def train_policy(
     params = net.project(params)
     opt_state = _adam(*lr_args, settings.schedule).init(params)
     key = jax.random.PRNGKey(seed)
+    tube = None
+    tube_box = jnp.zeros((2, demos.state_dim))
+    if settings.tube_weight > 0 and spec.order >= 1:  # TaSIL only: BC stays BC
+        tube = _Tube(
+            settings.tube_weight,
+            settings.tube_points,
+            expert,
+            expert_jac if expert_jac is not None else jax.jacrev(expert),
+            spec.floor,
+        )
+        flat = train_t.states.reshape(-1, demos.state_dim)
+        tube_box = jnp.stack(
+            [flat.min(axis=0) - settings.tube_radius, flat.max(axis=0) + settings.tube_radius]
+        )
 
     def run_chunk(params, opt_state, step0, n_steps):
         return _run_chunk(
-            params, opt_state, key, jnp.asarray(step0), pool, lr_args, net=net, spec=spec,
-            schedule=settings.schedule,
-            n_steps=n_steps, batch_size=batch_size, axis=axis,
+            params, opt_state, key, jnp.asarray(step0), pool, lr_args, tube_box, net=net,
+            spec=spec, schedule=settings.schedule,
+            n_steps=n_steps, batch_size=batch_size, axis=axis, tube=tube,
         )  # fmt: skip
 
+    # with the tube term, the recorded losses (and so early stopping and the restored step) add
+    # the term at a fixed draw of points, the same for every evaluation
+    eval_points = (
+        None
+        if tube is None
+        else draw_tube_points(
+            jax.random.fold_in(jax.random.PRNGKey(seed), TUBE_EVAL_STREAM),
+            tube_box[0],
+            tube_box[1],
+            TUBE_EVAL_POINTS,
+        )
+    )
+
     def eval_loss(p, targets):
-        return _eval_loss(p, targets, net=net, spec=spec)
+        value = _eval_loss(p, targets, net=net, spec=spec)
+        if tube is not None:
+            value = value + _eval_tube(p, eval_points, net=net, tube=tube)
+        return value
 
     hist_steps, hist_train, hist_val = [], [], []
 
@@ -422,6 +494,31 @@ class _Net:
         return (out, K) if self.skip else out
 
 
+@dataclass(frozen=True)
+class _Tube:
+    """Static description of the tube's matching term (hashable, for jit caching): its weight,
+    points per step, the expert and its Jacobian ``x -> (m, n)``, and the norm floor."""
+
+    weight: float
+    count: int
+    expert: Callable
+    expert_jac: Callable
+    floor: float
+
+    def loss(self, policy: Callable, key, box):
+        """``weight * mean_j (||policy(y_j) - pi*(y_j)|| + ||d policy(y_j) - d pi*(y_j)||_F)``
+        at ``count`` points drawn from ``key`` uniformly on ``box`` ``(2, n)``."""
+        pts = draw_tube_points(key, box[0], box[1], self.count)
+        return self.weight * tube_loss(policy, self.expert, self.expert_jac, pts, self.floor)
+
+
+#: stream of the tube's draws, folded into the seed's key (the mini-batches use the step itself)
+TUBE_STREAM = 0x7B0E
+#: stream and count of the fixed tube points added to the recorded (early-stopping) losses
+TUBE_EVAL_STREAM = 0x7B0F
+TUBE_EVAL_POINTS = 1024
+
+
 def _skip_init(layers, states, actions):
     """``(layers, K)``: ``K`` from the least-squares fit ``u ~ K x + c`` of the training pairs
     (``c`` added to the output bias); the network starts at its seeded initialisation, so the
@@ -449,30 +546,45 @@ def _adam(lr, total_steps, schedule: str) -> optax.GradientTransformation:
     return optax.adam(step_size)
 
 
+@partial(jax.jit, static_argnames=("net", "tube"))
+def _eval_tube(params, points, *, net: _Net, tube: _Tube):
+    return tube.weight * tube_loss(
+        net.policy(params), tube.expert, tube.expert_jac, points, tube.floor
+    )
+
+
 @partial(jax.jit, static_argnames=("net", "spec"))
 def _eval_loss(params, targets: Targets, *, net: _Net, spec):
     return imitation_loss(net.policy(params), targets, spec)
 
 
-@partial(jax.jit, static_argnames=("net", "spec", "schedule", "n_steps", "batch_size", "axis"))
+@partial(
+    jax.jit,
+    static_argnames=("net", "spec", "schedule", "n_steps", "batch_size", "axis", "tube"),
+)
 def _run_chunk(
-    params, opt_state, key, step0, pool: Targets, lr_args: tuple[jax.Array, jax.Array], *, net,
-    spec, schedule, n_steps, batch_size, axis,
+    params, opt_state, key, step0, pool: Targets, lr_args: tuple[jax.Array, jax.Array],
+    tube_box, *, net, spec, schedule, n_steps, batch_size, axis, tube: _Tube | None = None,
 ):  # fmt: skip
     """``n_steps`` Adam steps on seeded mini-batches drawn without replacement from ``pool``
-    along ``axis`` (states for the mean reduction, trajectories for the max reduction)."""
+    along ``axis`` (states for the mean reduction, trajectories for the max reduction); with
+    ``tube``, plus its matching term at points drawn on ``tube_box`` ``(2, n)``."""
     opt = _adam(*lr_args, schedule)
     pool_size = pool.states.shape[axis]
+    tube_key = jax.random.fold_in(key, TUBE_STREAM)
 
-    def loss_of(p, targets):
-        return imitation_loss(net.policy(p), targets, spec)
+    def loss_of(p, targets, step):
+        value = imitation_loss(net.policy(p), targets, spec)
+        if tube is not None:
+            value = value + tube.loss(net.policy(p), jax.random.fold_in(tube_key, step), tube_box)
+        return value
 
     def body(carry, step):
         p, s = carry
         idx = jax.random.choice(
             jax.random.fold_in(key, step), pool_size, (batch_size,), replace=False
         )
-        value, grads = jax.value_and_grad(loss_of)(p, _take_axis(pool, idx, axis))
+        value, grads = jax.value_and_grad(loss_of)(p, _take_axis(pool, idx, axis), step)
         updates, s = opt.update(grads, s, p)
         return (net.project(optax.apply_updates(p, updates)), s), value
 

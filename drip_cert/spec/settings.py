@@ -875,6 +875,13 @@ class TasilSettings:
     max_heldout_gap: float = setting(
         math.inf, "training fails when the held-out mean gap exceeds this", positive_or_inf
     )
+    tube_weight: float = setting(
+        0.0,
+        "weight of value and Jacobian matching at points drawn on the box of the training "
+        "states enlarged by tube_radius (1 when inf) (docs/math/tasil.md section 5.1); 0: off",
+        nonneg_float,
+    )
+    tube_points: int = setting(128, "points drawn on the tube per training step", positive_int)
     given: frozenset[str] = field(default=frozenset(), compare=False, repr=False)
 
     KEYS: ClassVar[Mapping[str, str]]
