@@ -313,9 +313,9 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument(
         "--method",
         type=_train_method,
-        default="tasil",
+        default=None,
         help="tasil (matches the policy's Jacobian too), bc (behaviour cloning), dagger or dart "
-        "(docs/baselines.md) (default: %(default)s)",
+        "(docs/baselines.md) (default: [tasil] method of the spec, else tasil)",
     )
     q.add_argument(
         "--architecture",
@@ -328,14 +328,15 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument(
         "--trajectories",
         type=_posint,
-        default=20,
-        help="expert demonstrations to draw (default: %(default)s)",
+        default=None,
+        help="expert demonstrations to draw (default: [tasil] trajectories of the spec, else 20)",
     )
     q.add_argument(
         "--seed",
         type=_nonneg_int,
-        default=0,
-        help="seed of the demonstrations and the training (default: %(default)s)",
+        default=None,
+        help="seed of the demonstrations and the training (default: [tasil] seed of the spec, "
+        "else 0)",
     )
     q.add_argument(
         "--steps",

@@ -268,10 +268,10 @@ def _heldout_gap(s: Any, tp: TrainedPolicy, samples: int) -> np.ndarray:
 def train_from_spec(
     spec_path: SpecSource,
     *,
-    method: str,
-    trajectories: int,
-    seed: int,
     out: str | Path,
+    method: str | None = None,
+    trajectories: int | None = None,
+    seed: int | None = None,
     steps: int | None = None,
     progress: bool = True,
     certify: bool = True,
@@ -322,6 +322,11 @@ def train_from_spec(
     if write_spec is not None:
         output_file(write_spec, "--write-spec file")
     spec = load_spec(spec_path)
+    # what the command line leaves out is the spec's: a default of the parser never overrides
+    # a key the spec writes
+    method = spec.settings.tasil.method if method is None else method
+    trajectories = spec.settings.tasil.trajectories if trajectories is None else trajectories
+    seed = spec.settings.tasil.seed if seed is None else seed
     if write_spec is not None and spec.path is None:
         raise SpecError("write_spec needs the spec as a file (it is copied with the policy)")
     if compare_all:

@@ -177,3 +177,33 @@ def test_compare_methods_spec_path_prefers_the_specs_folder(tmp_path):
 
 
 STRUCT_ATOL = 1e-12  # structure(x) = -x1 evaluated in float64: one negation, no rounding
+
+
+def test_train_options_left_out_are_the_spec_s_keys(tmp_path, monkeypatch, capsys):
+    """``--method``, ``--trajectories`` and ``--seed`` default to the spec's ``[tasil]`` keys: a
+    parser default (20 trajectories, seed 0, tasil) silently replaced a spec's
+    ``trajectories = 100`` before."""
+    import drip_cert.workflows as wf
+
+    seen: dict = {}
+
+    class Seen(Exception):
+        pass
+
+    def spy(spec, **kw):
+        seen.update(kw)
+        raise Seen
+
+    monkeypatch.setattr(wf, "run_pipeline", spy)
+    text = two_state_spec() + TINY + 'trajectories = 7\nseed = 5\nmethod = "bc"\n'
+    spec = write_spec(tmp_path, text)
+    run_cli(capsys, "train", str(spec), "--out", str(tmp_path / "o"), "--no-certify")  # Seen
+    assert seen["seed"] == 5
+    assert seen["tasil"]["trajectories"] == 7 and seen["tasil"]["method"] == "bc"
+    seen.clear()
+    run_cli(
+        capsys, "train", str(spec), "--out", str(tmp_path / "o"), "--no-certify",
+        "--trajectories", "3", "--seed", "1", "--method", "dagger",
+    )  # fmt: skip
+    assert seen["seed"] == 1
+    assert seen["tasil"]["trajectories"] == 3 and seen["tasil"]["method"] == "dagger"
