@@ -76,6 +76,7 @@ def test_result_fields_are_typed_not_any(cls, fields):
 
 def _type_namespace() -> dict[str, object]:
     from drip_cert.analysis.contraction.lmi import MetricResult
+    from drip_cert.analysis.contraction.slope_lmi import TraceObstruction
     from drip_cert.analysis.iss import DeltaISSResult
     from drip_cert.bounds.certificate import Certificate
     from drip_cert.bounds.l1drac.system import L1Section
@@ -87,6 +88,7 @@ def _type_namespace() -> dict[str, object]:
         for c in (
             DeltaISSResult,
             MetricResult,
+            TraceObstruction,
             Certificate,
             L1Section,
             TasilCertificate,
