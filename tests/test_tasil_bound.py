@@ -462,3 +462,40 @@ def test_l_delta_box_contains_the_exact_tube_box():
             hi = max(Fraction(float(pts[:, i].max())), Fraction(float(S[i, 1])))
             assert Fraction(float(box[i, 0])) <= lo - Fraction(margin)
             assert Fraction(float(box[i, 1])) >= hi + Fraction(margin)
+
+
+def test_the_support_holds_every_expert_trajectory_with_a_rate_on_a_larger_box():
+    """tasil.md 3.12 "Which box": a forward-invariant support (Nagumo) holds every expert
+    trajectory when solutions are unique there: a rate proved for all x, or on a box holding the
+    support in its interior. A rate on a box the support touches does not give uniqueness on
+    the boundary, and no rate gives nothing."""
+    from types import SimpleNamespace
+
+    import sympy as sp
+
+    from drip_cert import System
+    from drip_cert.bounds.certificate import _expert_set
+    from drip_cert.provenance import How, Scope
+
+    x1, x2 = sp.symbols("x1 x2", real=True)
+    s = System(
+        name="cubic",
+        states=(x1, x2),
+        f=sp.Matrix([-x1 - x1**3 + x2, -x2**3]),
+        g=sp.Matrix([[0], [1]]),
+        expert=sp.Matrix([-x2]),
+        support=[(-0.5, 0.5), (-0.5, 0.5)],
+        horizon=2.0,
+    )
+
+    def rate(box):
+        return SimpleNamespace(holds=True, how=How.SOUND, scope=Scope(box=box))
+
+    S, why = _expert_set(s, rate(((-1.0, 1.0), (-1.0, 1.0))), None, equilibrium_ball=False)
+    assert S is not None and np.array_equal(S, np.asarray(s.support)), why
+    S, why = _expert_set(s, rate(((-0.5, 1.0), (-1.0, 1.0))), None, equilibrium_ball=False)
+    assert S is None  # the support touches the box's boundary: uniqueness is not proved there
+    S, _ = _expert_set(s, rate(None), None, equilibrium_ball=False)
+    assert S is not None  # a rate for all x
+    unproved = SimpleNamespace(holds=True, how=How.ESTIMATE, scope=Scope(box=None))
+    assert _expert_set(s, unproved, None, equilibrium_ball=False)[0] is None

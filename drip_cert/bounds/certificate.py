@@ -1394,13 +1394,25 @@ def _expert_set(
     s: System, r: Any, inv: InvariantSet | None, equilibrium_ball: bool = True
 ) -> tuple[np.ndarray | None, str]:
     """A box ``S`` proved to hold every expert trajectory from the support on ``[0, T]``: the
-    support itself when it is forward invariant (Nagumo; needs the expert's rate for all x),
-    else the box around a proved invariant ball, else (``equilibrium_ball``) the box around the
-    ball ``||x|| <= max_support ||x||`` when the rate holds for all x and ``x = 0`` is an
-    equilibrium of the expert loop; ``(None, why)`` when none is proved."""
+    support itself when it is forward invariant (Nagumo, docs/math/contraction.md 7.2), else the
+    box around a proved invariant ball, else (``equilibrium_ball``) the box around the ball
+    ``||x|| <= max_support ||x||`` when the rate holds for all x and ``x = 0`` is an equilibrium
+    of the expert loop; ``(None, why)`` when none is proved.
+
+    Nagumo's condition gives one solution that stays in the support; *every* solution does when
+    solutions are unique, which the expert's proved rate gives on the set where it holds: for all
+    x, or on a box ``B`` holding the support in its interior (a second solution from the same
+    state coincides with the first while both are in the convex ``B``, by the one-sided Lipschitz
+    bound; it would have to reach the boundary of ``B`` at a point of the support, which lies in
+    the interior: it never leaves). A rate on a box that the support touches does not suffice."""
     support = np.asarray(s.support, dtype=float)
     enclose = block_enclose_callback(s.blocks) if s.blocks else None
-    if r.holds and r.how.proved and r.scope.all_x and r.scope.covers_time(s.horizon):
+    if (
+        r.holds
+        and r.how.proved
+        and r.scope.covers_time(s.horizon)
+        and (r.scope.all_x or _in_interior(support, r.scope.box))
+    ):
         try:
             if invariant_box(s.closed_loop("expert"), s.states, s.t, support, s.horizon, enclose):
                 return support, "the support (forward invariant for the expert, Nagumo)"
@@ -1427,6 +1439,13 @@ def _expert_set(
         "the support is not proved forward invariant and no invariant ball is proved"
         + ("" if inv is None else f": {inv.reason}")
     )
+
+
+def _in_interior(inner: np.ndarray, outer: Any) -> bool:
+    """Whether the box ``inner`` lies in the interior of the box ``outer`` (strictly inside on
+    every side)."""
+    o = np.asarray(outer, dtype=float)
+    return bool(np.all(o[:, 0] < inner[:, 0]) and np.all(inner[:, 1] < o[:, 1]))
 
 
 def _corner_norm_up(box: np.ndarray) -> float:
