@@ -481,7 +481,7 @@ def test_the_support_holds_every_expert_trajectory_with_a_rate_on_a_larger_box()
     s = System(
         name="cubic",
         states=(x1, x2),
-        f=sp.Matrix([-x1 - x1**3 + x2, -x2**3]),
+        f=sp.Matrix([-x1 - x1**3 + x2, -(x2**3)]),
         g=sp.Matrix([[0], [1]]),
         expert=sp.Matrix([-x2]),
         support=[(-0.5, 0.5), (-0.5, 0.5)],
