@@ -14,9 +14,9 @@ from drip_cert.model.mlp import init_mlp
 from drip_cert.sim.config import SimConfig
 from drip_cert.sim.dtype_effect import DtypeEffect, dtype_effect, policy_dtype_effect
 from drip_cert.sim.engine import simulate
-from drip_cert.sim.kernel import build_chunk_fn
+from drip_cert.sim.kernel import _advance_jit, build_chunk_fn
 from drip_cert.sim.noise import normals
-from drip_cert.sim.precision import lower_precision
+from drip_cert.sim.precision import in_dtype, lower_precision
 from drip_cert.sim.resume import settings_hash
 from tests.test_engine import _CFG, _arrays, _mlp_model, _x0, _x0_bar
 
@@ -190,6 +190,61 @@ def test_dtype_setting_hash_and_effect(model):
     assert "end to end" in eff.note()
     with pytest.raises(SpecError, match="float32"):
         dtype_effect(model, cfg, _x0, _x0_bar)  # nothing in float32: nothing to measure
+
+
+def _advance_stablehlo(model, cfg, batch: int = 8) -> str:
+    """The kernel's advance program for ``cfg``, as StableHLO text before XLA's optimizations."""
+    kern = build_chunk_fn(model, cfg, _x0, _x0_bar)
+    compiled = kern.compile(batch)
+    carry, _ = compiled.start(kern.key, jnp.arange(batch, dtype=jnp.uint32))
+    return _advance_jit.lower(
+        kern.key,
+        carry,
+        jnp.uint32(0),
+        model=kern.model,
+        config=kern.config,
+        records_per_call=compiled.records_per_call,
+    ).as_text()
+
+
+def _batched_products_and_row_sums(text: str) -> tuple[int, int]:
+    lines = text.splitlines()
+    dots = sum("stablehlo.dot_general" in ln and "batching_dims" in ln for ln in lines)
+    return dots, sum("stablehlo.reduce" in ln for ln in lines)
+
+
+def test_float32_step_has_no_batched_products_or_row_reductions(model):
+    """The float32 step writes its per-path products (the noise term, Theta lam_hat, g u) and
+    its row sums (the guard's norm and finiteness, a norm inside Lambda_mu) as multiply-adds over
+    the batch. XLA's CPU backend vectorizes a batched 3x3 / 4x4 product or a 4-column reduction
+    across the 4 columns only, as many lanes as in float64, which held the float32 engine at
+    ~1.75x float64 (issue 26). The float64 step keeps its forms (the same numbers as before)."""
+    d64, r64 = _batched_products_and_row_sums(_advance_stablehlo(model, _CFG))
+    assert d64 > 0 and r64 > 0  # the forms the float32 step avoids, so the count can detect them
+    cfg32 = dataclasses.replace(_CFG, dtype="float32")
+    assert _batched_products_and_row_sums(_advance_stablehlo(model, cfg32)) == (0, 0)
+
+
+F32_SUM_REL = 8 * F32_EPS
+"""A float32 norm of 4 O(1) terms against the same sum in numpy float32: a few roundings of the
+4 squares, 3 additions and the sqrt (the compiler may fuse a multiply-add and skip one); a
+missing or doubled term moves it by > 1e-2."""
+
+
+def test_in_dtype_writes_small_float32_sums_in_order():
+    """A float32 sum over at most 16 terms (a norm of a state) is written as x0 + x1 + ... in
+    order (elementwise once vmapped over the paths); a longer one stays XLA's reduction."""
+    x = np.array([0.3, -1.7, 2.9, 0.11])
+    norm = in_dtype(lambda v: jnp.sqrt(jnp.sum(v * v)), (jnp.zeros(4),))
+    long = in_dtype(lambda v: jnp.sum(jnp.tile(v, 5)), (jnp.zeros(4),))
+    assert "reduce_sum" not in {e.primitive.name for e in jax.make_jaxpr(norm)(x).jaxpr.eqns}
+    assert "reduce_sum" in {e.primitive.name for e in jax.make_jaxpr(long)(x).jaxpr.eqns}
+    x32 = x.astype(np.float32)
+    expect = float(np.sqrt(np.sum(x32 * x32, dtype=np.float32)))
+    got = jax.jit(norm)(x)
+    assert got.dtype == np.float32
+    assert abs(float(got) - expect) <= F32_SUM_REL * expect
+    assert float(jax.jit(long)(x)) == pytest.approx(5 * float(np.sum(x32)), rel=F32_SUM_REL)
 
 
 def test_float32_normals_are_the_same_increments_rounded():

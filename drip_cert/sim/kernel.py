@@ -40,7 +40,7 @@ from drip_cert.control.l1drac import L1State, l1_init, l1_step
 from drip_cert.errors import SpecError
 from drip_cert.model.numeric import SimModel
 from drip_cert.sim.config import STATUS_CAP, STATUS_NONFINITE, STATUS_OK, SimConfig
-from drip_cert.sim.noise import normals
+from drip_cert.sim.noise import normal_columns, normals
 from drip_cert.sim.precision import in_dtype, lower_precision
 
 __all__ = ["ChunkKernel", "CompiledChunk", "ExportedChunk", "build_chunk_fn"]
@@ -61,6 +61,15 @@ _NOISY_SCENARIOS = (*_TRUE_SCENARIOS, "nominal_sde")  #: driven by the Brownian 
 # whose float32 rounding depended on B through XLA's choice of kernel: 1 ulp, chunk-dependent.
 # It costs ~10-20 CPU ns per path-step, measured in benchmarks/mc_throughput.py's units)
 _SHARED: L1State[int | None] = L1State(x_hat=0, eta=0, lam_hat=0, theta=0, step=None)
+# float32: Theta_ad shared too. l1_step then writes Theta lam_hat as n elementwise products per
+# path (drip_cert.control.l1drac._matvec): no matrix product, so no rounding that depends on B,
+# and no (B, m, n) copy of Theta to select and read every step (~10 CPU ns per path-step)
+_SHARED32: L1State[int | None] = L1State(x_hat=0, eta=0, lam_hat=0, theta=None, step=None)
+
+
+def _l1_axes(ftype) -> L1State[int | None]:
+    """The batch axes of the L1-DRAC state in ``ftype``'s engine."""
+    return _SHARED32 if ftype == jnp.float32 else _SHARED
 
 
 def build_chunk_fn(
@@ -311,10 +320,24 @@ class _ByIdentity:
 
 
 def _guard(x_old, x_new, code, inv_cap: float):
-    """Freeze the paths whose new state is non-finite or beyond the cap; update their codes."""
-    nonfinite = ~jnp.all(jnp.isfinite(x_new), axis=-1)
+    """Freeze the paths whose new state is non-finite or beyond the cap; update their codes.
+
+    In float32 the two row reductions are written column by column (XLA's CPU reduction of a
+    ``(B, 4)`` array over its 4 columns cost ~10 CPU ns per path-step in float32, more than in
+    float64; the column form ~1 ns); float64 keeps ``jnp.all`` / ``jnp.sum``.
+    """
     scaled = x_new * inv_cap  # ||x|| > cap without overflowing the square
-    capped = jnp.sum(scaled * scaled, axis=-1) > 1.0
+    if x_new.dtype == jnp.float32:
+        cols = [x_new[:, k] for k in range(x_new.shape[-1])]
+        finite = jnp.isfinite(cols[0])
+        sq = scaled[:, 0] * scaled[:, 0]
+        for k in range(1, len(cols)):
+            finite = finite & jnp.isfinite(cols[k])
+            sq = sq + scaled[:, k] * scaled[:, k]
+        nonfinite, capped = ~finite, sq > 1.0
+    else:
+        nonfinite = ~jnp.all(jnp.isfinite(x_new), axis=-1)
+        capped = jnp.sum(scaled * scaled, axis=-1) > 1.0
     new_code = jnp.where(
         code != STATUS_OK,
         code,
@@ -346,13 +369,45 @@ def _start_impl(key, idx, *, model, config, samplers):
     codes = tuple(_guard(x, x, zero, inv_cap)[1] for x in xs)
     l1s = None
     if "learned_l1_true" in scen:
-        l1s = jax.vmap(l1_init, in_axes=(0, None), out_axes=_SHARED)(
+        l1s = jax.vmap(l1_init, in_axes=(0, None), out_axes=_l1_axes(ftype))(
             x0b, model.theta_ad(jnp.float64(0.0))
         )
         l1s = jax.tree_util.tree_map(
             lambda v: v.astype(ftype) if jnp.issubdtype(v.dtype, jnp.floating) else v, l1s
         )
     return (xs, codes, l1s, idx), jnp.stack(xs)[None]
+
+
+def _diffuse(sig, dw):
+    """The noise term ``sig dW`` of every path: ``sig`` ``(B, n, d)``, ``dw`` ``(B, d)``.
+
+    float64: one batched matrix-vector product (``einsum``). float32: ``dw`` comes as its ``d``
+    columns (:func:`drip_cert.sim.noise.normal_columns`) and the product is written as ``d``
+    elementwise multiply-adds over the batch; XLA's CPU batched product of 4x4 blocks cost the
+    same in float32 as in float64 (~6 and ~2.4 CPU ns per path-step), the multiply-adds ~1.2 ns.
+    The sum runs over ``k = 0 .. d-1`` in order, path by path, so no number depends on the batch.
+    """
+    if isinstance(dw, tuple):
+        acc = sig[:, :, 0] * dw[0][:, None]
+        for k in range(1, len(dw)):
+            acc = acc + sig[:, :, k] * dw[k][:, None]
+        return acc
+    return jnp.einsum("bnd,bd->bn", sig, dw)
+
+
+def _times_g(v, g_t):
+    """``g(t) v`` of every path: ``v`` ``(B, m)``, ``g_t`` ``(n, m)`` shared; ``(B, n)``.
+
+    float64: ``v @ g_t.T``. float32: the ``m`` column products summed in order ``k = 0 .. m-1``
+    (elementwise over the paths; XLA's CPU product with a 4-wide contraction cost ~3-9 CPU ns per
+    path-step in float32, about what it costs in float64).
+    """
+    if v.dtype != jnp.float32:
+        return v @ g_t.T
+    acc = v[:, 0:1] * g_t[:, 0]
+    for k in range(1, v.shape[-1]):
+        acc = acc + v[:, k : k + 1] * g_t[:, k]
+    return acc
 
 
 @dataclass(frozen=True)
@@ -429,8 +484,8 @@ def _advance_impl(key, carry, r0, *, model, config, records_per_call):
     l1_b = (
         jax.vmap(
             lambda st, x, fk, g_t, th: l1_step(l1p, st, x, fk, g_t, th),
-            in_axes=(_SHARED, 0, 0, None, 0),
-            out_axes=(0, _SHARED),
+            in_axes=(_l1_axes(ftype), 0, 0, None, 0 if ftype != jnp.float32 else None),
+            out_axes=(0, _l1_axes(ftype)),
         )
         if l1p is not None
         else None
@@ -443,7 +498,7 @@ def _advance_impl(key, carry, r0, *, model, config, records_per_call):
         # when g depends on the state (then evaluated per path)
         if g_t is None:
             return f_b(t, x) + jnp.einsum("bnm,bm->bn", g_b(t, x), policy_b(x))
-        return f_b(t, x) + policy_b(x) @ g_t.T
+        return f_b(t, x) + _times_g(policy_b(x), g_t)
 
     def step(carry, j):
         xs, codes, l1s, idx, buf = carry
@@ -452,7 +507,9 @@ def _advance_impl(key, carry, r0, *, model, config, records_per_call):
         g_t = None if sim_model.g_state else model.g(t, jnp.zeros(sim_model.n, ftype))
         new_xs, new_codes = [], []
         dw = None
-        if has_noise:
+        if has_noise and ftype == jnp.float32:  # the d columns, each (B,): see _diffuse
+            dw = tuple(sqrt_dt * z for z in normal_columns(k_bm, idx, j, d, ftype))
+        elif has_noise:
             dw = sqrt_dt * normals(k_bm, idx, j, d, ftype)
         for i, s in enumerate(scen):
             x = xs[i]
@@ -461,18 +518,20 @@ def _advance_impl(key, carry, r0, *, model, config, records_per_call):
             elif s == "learned_nominal":
                 x_new = x + dt * known_drift(t, x, g_t, learned_b)
             elif s == "nominal_sde":  # L1-DRAC (4b): the known diffusion only, same dW
-                noise = jnp.einsum("bnd,bd->bn", known_diff_b(t, x), dw)
+                noise = _diffuse(known_diff_b(t, x), dw)
                 x_new = x + dt * known_drift(t, x, g_t, learned_b) + noise
             elif s == "learned_true":
                 drift = known_drift(t, x, g_t, learned_b) + lam_mu_b(t, x)
-                noise = jnp.einsum("bnd,bd->bn", diff_b(t, x), dw)
+                noise = _diffuse(diff_b(t, x), dw)
                 x_new = x + dt * drift + noise
             else:  # learned_l1_true
                 fk = known_drift(t, x, g_t, learned_b)
                 th = model.theta_ad(t)
-                u, l1s = l1_b(l1s, x, fk, g_t, jnp.broadcast_to(th, (x.shape[0], *th.shape)))
-                drift = fk + u @ g_t.T + lam_mu_b(t, x)
-                noise = jnp.einsum("bnd,bd->bn", diff_b(t, x), dw)
+                if ftype != jnp.float32:
+                    th = jnp.broadcast_to(th, (x.shape[0], *th.shape))
+                u, l1s = l1_b(l1s, x, fk, g_t, th)
+                drift = fk + _times_g(u, g_t) + lam_mu_b(t, x)
+                noise = _diffuse(diff_b(t, x), dw)
                 x_new = x + dt * drift + noise
             x_new, c_new = _guard(x, x_new, codes[i], inv_cap)
             new_xs.append(x_new)

@@ -20,6 +20,7 @@ the simulation only.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Sequence
 from typing import Any
 
@@ -119,6 +120,33 @@ def _holds_jaxpr(p) -> bool:
     return isinstance(p, jcore.Jaxpr | jcore.ClosedJaxpr)
 
 
+def _unrolled_sum_applies(x, axes: Sequence[int], lo: np.dtype) -> bool:
+    """Whether a float32 ``reduce_sum`` of ``x`` over ``axes`` is written as a sum in order.
+
+    The engine vmaps these functions over the paths, and XLA's CPU reduction of a ``(B, 4)``
+    array over its 4 columns (e.g. a norm inside ``Lambda_mu``) cost ~7-10 CPU ns per path-step
+    in float32, more than in float64; :func:`_sum_in_order` makes it elementwise over the paths.
+    Only small reductions (at most :data:`_UNROLL_MAX_TERMS` terms), only in float32.
+    """
+    if lo != np.float32 or getattr(x, "dtype", None) != np.float32:
+        return False
+    return 0 < math.prod(x.shape[a] for a in axes) <= _UNROLL_MAX_TERMS
+
+
+_UNROLL_MAX_TERMS = 16
+"""Most terms of a float32 sum that :func:`_sum_in_order` unrolls (beyond, XLA's reduction)."""
+
+
+def _sum_in_order(x, axes: Sequence[int]):
+    """``sum(x, axes)`` as ``x[0] + x[1] + ...`` along each axis (the last first), in order."""
+    for ax in sorted(axes, reverse=True):
+        acc = jax.lax.index_in_dim(x, 0, ax, keepdims=False)
+        for k in range(1, x.shape[ax]):
+            acc = acc + jax.lax.index_in_dim(x, k, ax, keepdims=False)
+        x = acc
+    return x
+
+
 def _eval(jaxpr, consts: Sequence, args: Sequence, lo: np.dtype) -> list:
     """Evaluate ``jaxpr`` with float64 replaced by ``lo`` (see :func:`lower_precision`)."""
     env: dict = {}
@@ -146,6 +174,8 @@ def _eval(jaxpr, consts: Sequence, args: Sequence, lo: np.dtype) -> list:
             res = eqn.primitive.bind(*[_widen(v) for v in invals], **eqn.params)
             res = res if eqn.primitive.multiple_results else [res]
             outs = [_narrow(r, lo) for r in res]
+        elif name == "reduce_sum" and _unrolled_sum_applies(invals[0], eqn.params["axes"], lo):
+            outs = [_sum_in_order(invals[0], eqn.params["axes"])]
         else:
             params = {k: _param(v, lo) for k, v in eqn.params.items()}
             res = eqn.primitive.bind(*invals, **params)
