@@ -59,7 +59,7 @@ from drip_cert.sim.config import SCENARIOS, SimConfig
 from drip_cert.sim.dtype_effect import EFFECT_PATHS, dtype_effect
 from drip_cert.sim.engine import SUB_BATCH_PATHS, default_workers, simulate
 from drip_cert.sim.kernel import build_chunk_fn
-from drip_cert.sim.noise import normals, normals_via_jax
+from drip_cert.sim.noise import normal_columns, normals, normals_via_jax
 
 N = 4
 
@@ -409,7 +409,9 @@ def _ingredients(
     def tanhs(z, j):  # the fixed point of z = tanh(z) + 1/2 keeps z normal (no denormals)
         return jnp.tanh(z) + half
 
-    def noise(x, j):
+    def noise(x, j):  # in the engine's form: float32 column by column (normal_columns)
+        if np.dtype(dtype) == np.float32:
+            return half * x + jnp.stack(normal_columns(key, idx, j, N, dtype), axis=1)
         return half * x + normals(key, idx, j, N, dtype)
 
     rest = plain_scan_reference(h, pol, l1, steps, dtype, mlps=False, noise=False)
