@@ -127,3 +127,13 @@ def test_benchmark_runs_and_prints_its_ratio_line(capsys):
     assert eng > 0 and npy > 0
     q = eng / npy
     assert abs(ratio - q) <= RATIO_DECIMAL_ABS + RATE_QUOTIENT_REL * q
+
+
+@pytest.mark.slow  # three processes compile the engine: ~20 s on 2 busy cores
+def test_workers_benchmark_prints_threads_and_pinned_processes(capsys):
+    workers = load_script(ROOT / "benchmarks" / "mc_workers.py", "mc_workers")
+    if workers.main(["--paths", "256", "--T", "0.02", "--repeats", "1"]) == 1:
+        pytest.skip("needs 2 usable cores")
+    lines = capsys.readouterr().out.strip().splitlines()
+    assert re.search(r"threads \(the engine\): .* 2 workers / 1 worker \d+\.\d+x", lines[-2])
+    assert re.search(r"processes pinned to a core: .* -> \d+\.\d+x", lines[-1])
