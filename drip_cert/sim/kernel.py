@@ -16,7 +16,13 @@ runs the same step on the same numbers, so the split into calls changes no bit.
 Arithmetic: float64, or float32 end to end with ``SimConfig(dtype="float32")``: every model
 function re-evaluated in float32 (:func:`drip_cert.sim.precision.in_dtype`), float32 normals
 from the same counters, float32 states and L1-DRAC; the records are float32 and the host
-accumulates them in float64.
+accumulates them in float64. The float32 step writes its per-path small products (the noise
+term, ``Theta lam_hat``, ``g u``) and row sums (the guard, small sums inside the model) as
+multiply-adds over the batch and draws its normals column by column (:func:`_diffuse`,
+:func:`_times_g`, :func:`_guard`): XLA's CPU backend vectorizes a ``(B, 4)`` loop, a batched
+4x4 product or a 4-column reduction across the 4 columns only, as many lanes as in float64, so
+in those forms float32 was no cheaper (issue 26: kernel 195 -> 155 CPU ns per path-step, 2.1x ->
+2.6x float64 on one core). The float64 step keeps its forms and its numbers.
 
 Randomness: path ``i`` draws its initial states from ``fold_in(k_x0, i)`` (and
 ``fold_in(k_x0bar, i)``) and its Brownian increments from the counter-based
