@@ -324,7 +324,9 @@ def slope_lmi_rate_global(
     t0 = time.perf_counter()
     if which == "learned" and s.learned is None:
         return None
-    dec = affine_in_blocks(s.closed_loop(which), s)
+    # a block read through a constant input map (N(Theta^{-1} z) in a metric's coordinates) is
+    # folded into its first layer by slope_structure
+    dec = affine_in_blocks(s.closed_loop(which), s, input_maps=True)
     if dec is None or not dec.C or any(s.blocks[b].mlp is None for b in dec.C):
         return None
     mlps = {b: s.blocks[b].mlp for b in dec.C}
@@ -345,8 +347,11 @@ def slope_lmi_rate_global(
         "verified in Arb (docs/math/contraction.md section 11)",
         scope=GLOBAL,
     )
+    folded = f" (input maps folded into the first layer: {', '.join(sorted(dec.S))})"
     note = (
-        f"{st.N} neurons, LMI size {st.dim}, {res.reason}; trace condition tr J(s)/n <= "
+        f"{st.N} neurons, LMI size {st.dim}, {res.reason}"
+        + (folded if dec.S else "")
+        + "; trace condition tr J(s)/n <= "
         f"{res.obstruction.mean_eigenvalue:.4g} at the worst slope vertex found"
     )
     return GlobalRate(_result(rate, "slope-lmi", note, t0), rate, ())

@@ -62,7 +62,12 @@ from drip_cert.analysis.growth.closed_loop import CONVERSION_ULPS
 from drip_cert.analysis.networks.mlp import jacobian_np
 from drip_cert.analysis.networks.mlp.derivatives import enclose_box_and_centre
 from drip_cert.errors import SpecError
-from drip_cert.model.blocks import BlockFunction, block_applications
+from drip_cert.model.blocks import (
+    BlockFunction,
+    MappedMLP,
+    block_applications,
+    linear_input_map,
+)
 from drip_cert.model.mlp import MLP
 from drip_cert.model.system import System
 from drip_cert.numerics.bnb_batch import BatchBnbResult, maximize_batch
@@ -116,7 +121,10 @@ class JacobianInBlocks:
 
     ``A_rad``, ``T_rad`` bound the distance of the float coefficients to the exact ones
     (:data:`~drip_cert.analysis.growth.closed_loop.CONVERSION_ULPS` spacings of the sympy
-    constants).
+    constants). ``first_rad[k]`` (``None``: exact) is the radius of ``mlps[k]``'s first-layer
+    weight when ``h_k`` is a network read through an input map, ``h_k(x) = N(S x)``, folded
+    (:class:`~drip_cert.model.blocks.MappedMLP`): ``mlps[k]`` is the folded network, its first
+    weight the float midpoint of ``W_0 S``, and every enclosure holds for the interval weight.
     """
 
     A: np.ndarray
@@ -125,11 +133,16 @@ class JacobianInBlocks:
     T_rad: tuple[np.ndarray, ...]
     mlps: tuple[MLP, ...]
     names: tuple[str, ...]
+    first_rad: tuple[np.ndarray | None, ...] = ()
 
     @property
     def dim(self) -> int:
         """``d``, the state dimension."""
         return int(self.mlps[0].in_dim) if self.mlps else 0
+
+    def rad0(self, k: int) -> np.ndarray | None:
+        """The first-layer weight radius of block ``k`` (``None``: exact)."""
+        return self.first_rad[k] if k < len(self.first_rad) else None
 
     def evaluate(self, X: np.ndarray) -> np.ndarray:
         """Float ``M(x)`` at points ``X`` (``(N, d)``): an estimate, for sampling."""
@@ -140,13 +153,42 @@ class JacobianInBlocks:
         return out
 
 
+def _input_maps(
+    apps: set[BlockFunction], x: tuple[sp.Symbol, ...], mlps: Mapping[str, MLP]
+) -> dict[str, sp.ImmutableMatrix | None] | None:
+    """Per block name, its input map ``S`` (``None``: applied to the state itself), or ``None``
+    when a block is applied to anything but ``S x`` with one constant invertible square ``S``."""
+    maps: dict[str, sp.ImmutableMatrix | None] = {}
+    for a in apps:
+        if a.args == x:
+            S = None
+        else:
+            S = linear_input_map(a, x)
+            if S is None or S.shape != (len(x), len(x)) or S.det() == 0:
+                return None
+            if S == sp.eye(len(x)):
+                S = None
+        if a.block_name in maps and maps[a.block_name] != S:
+            return None
+        maps[a.block_name] = S
+    if any(S is not None and mlps[b].in_dim != len(x) for b, S in maps.items()):
+        return None
+    return maps
+
+
 def decompose_jacobian(
     M: sp.MatrixBase, states: Sequence[sp.Symbol], mlps: Mapping[str, MLP]
 ) -> JacobianInBlocks | None:
     """Read ``M = A + sum_k T_k : D h_k(x)`` from a symbolic matrix, ``None`` when ``M`` is not of
     that form (an entry non-linear in the block Jacobian entries, depending on the state or on
-    other symbols, a block value or Hessian entry, a block not applied to the state in order, a
-    block without an MLP)."""
+    other symbols, a block value or Hessian entry, a block without an MLP, a block applied to
+    anything but the state or a constant invertible linear map of it).
+
+    A block applied to ``S x`` (e.g. ``N(Theta^{-1} z)`` in the coordinates of a metric,
+    docs/math/contraction.md section 5.4) is read as the folded network ``h(x) = N(S x)``
+    (:class:`~drip_cert.model.blocks.MappedMLP`): its Jacobian entries in ``M`` are ``DN(S x)``,
+    and ``DN(S x) = Dh(x) S^{-1}`` is substituted exactly (sympy) before ``T_k`` is read, so
+    ``M = A + sum_k T_k : Dh_k(x)`` with ``h_k`` the folded network (first weight an interval)."""
     M = sp.Matrix(M)
     x = tuple(states)
     apps: set[BlockFunction] = set()
@@ -155,11 +197,40 @@ def decompose_jacobian(
     if not apps:
         return None
     for a in apps:
-        if len(a.deriv) != 1 or a.args != x or a.block_name not in mlps:
+        if len(a.deriv) != 1 or a.block_name not in mlps:
             return None
+    maps = _input_maps(apps, x, mlps)
+    if maps is None:
+        return None
     dummies = {a: sp.Dummy(f"d{type(a).__name__}") for a in apps}
-    lin = M.xreplace(dummies).applyfunc(sp.expand)
-    dvars = list(dummies.values())
+    lin = M.xreplace(dummies)
+    # the folded blocks' Jacobian entries: d'_{o, m} = (DN(S x) S)_{o, m} = Dh(x)_{o, m}
+    folded: dict[tuple[str, int, int], sp.Dummy] = {}
+    subs: dict[sp.Dummy, sp.Expr] = {}
+    for a, dv in dummies.items():
+        S = maps[a.block_name]
+        if S is None:
+            continue
+        Si = S.inv()
+        o, l_ = a.out_index, a.deriv[0]
+        terms = []
+        for m in range(len(x)):
+            key = (a.block_name, o, m)
+            if key not in folded:
+                folded[key] = sp.Dummy(f"f{a.block_name}_{o}_{m}")
+            terms.append(folded[key] * Si[m, l_])
+        subs[dv] = sp.Add(*terms)
+    if subs:
+        lin = lin.xreplace(subs)
+    lin = lin.applyfunc(sp.expand)
+    # (block, out, in) -> the variable of M's linear form
+    slots: dict[sp.Dummy, tuple[str, int, int]] = {
+        dv: (a.block_name, a.out_index, a.deriv[0])
+        for a, dv in dummies.items()
+        if maps[a.block_name] is None
+    }
+    slots.update({dv: key for key, dv in folded.items()})
+    dvars = list(slots)
     for e in lin:
         if e.free_symbols - set(dvars):
             return None
@@ -175,25 +246,27 @@ def decompose_jacobian(
         A = np.array([[float(lin[j, i].xreplace(zero)) for i in range(q)] for j in range(p)])
     except TypeError:
         return None
-    names = tuple(sorted({a.block_name for a in apps}))
+    names = tuple(sorted(maps))
     Ts = {b: np.zeros((p, q, mlps[b].out_dim, d)) for b in names}
-    for a, z in dummies.items():
-        T = Ts[a.block_name]
+    for z, (b, o, l_) in slots.items():
+        T = Ts[b]
         for j in range(p):
             for i in range(q):
-                T[j, i, a.out_index, a.deriv[0]] = float(sp.diff(lin[j, i], z))
+                T[j, i, o, l_] = float(sp.diff(lin[j, i], z))
     if not all(np.all(np.isfinite(T)) for T in Ts.values()) or not np.all(np.isfinite(A)):
         return None
     # float() is exact for binary floats, correctly rounded for rationals, within an ulp else
     A_rad = CONVERSION_ULPS * np.spacing(np.abs(A))
     Tt = tuple(Ts[b] for b in names)
+    mapped = {b: MappedMLP(mlps[b], S) for b, S in maps.items() if S is not None}
     return JacobianInBlocks(
         A=A,
         A_rad=A_rad,
         T=Tt,
         T_rad=tuple(CONVERSION_ULPS * np.spacing(np.abs(T)) for T in Tt),
-        mlps=tuple(mlps[b] for b in names),
+        mlps=tuple(mapped[b].folded if b in mapped else mlps[b] for b in names),
         names=names,
+        first_rad=tuple(mapped[b].rad0 if b in mapped else None for b in names),
     )
 
 
@@ -249,8 +322,8 @@ def _combine(dec: JacobianInBlocks, lo: np.ndarray, hi: np.ndarray):
     jc_hi = np.broadcast_to(add_up_np(dec.A, dec.A_rad), (N, p, q))
     jv_lo, jv_hi = jc_lo, jc_hi
     hc_lo = hc_hi = hb_lo = hb_hi = np.zeros((N, p, q, d))
-    for T, T_rad, mlp in zip(dec.T, dec.T_rad, dec.mlps):
-        box, cen = enclose_box_and_centre(mlp, lo, hi, hessian=mlp.smooth)
+    for k, (T, T_rad, mlp) in enumerate(zip(dec.T, dec.T_rad, dec.mlps)):
+        box, cen = enclose_box_and_centre(mlp, lo, hi, hessian=mlp.smooth, first_rad=dec.rad0(k))
         o = mlp.out_dim
         Tm, Tr = T.reshape(p * q, o * d), T_rad.reshape(p * q, o * d)
 
