@@ -247,3 +247,79 @@ def test_permutation_theta_gives_the_x_numbers():
     rz = slope_lmi_rate(slope_structure(decz, system_mlps(z)), obstruct=False).rate
     assert rx is not None and rz is not None
     assert rz == pytest.approx(rx, abs=SOLVER_TOL)
+
+
+# ------------------------------------------------------------------ a plant nonlinearity
+
+
+#: the same oscillator with a pendulum's restoring force -sin q (its Jacobian holds -cos q):
+#: not affine in blocks, so on 17f5740 the batched search did not apply in x either
+PEND = System(
+    name="pendulum-like",
+    states=(q, v),
+    f=[v, -sp.sin(q) - sp.Rational(1, 2) * v],
+    g=[[0], [1]],
+    expert=[sp.sin(q) - 2 * q - v],
+    support=[(-1.0, 1.0), (-0.5, 0.5)],
+    horizon=5.0,
+)
+
+
+def _true_pend_z_jacobian(Z, theta, Ti, mlp):
+    X = Z @ Ti.T
+    A = np.zeros((X.shape[0], 2, 2))
+    A[:, 0, 1] = 1.0
+    A[:, 1, 0] = -np.cos(X[:, 0]) - 1.0  # the plant's -cos q and K = (-1, -1)
+    A[:, 1, 1] = -1.5
+    Jx = A + np.array([[0.0], [1.0]]) @ jacobian_np(mlp, X)
+    return theta @ Jx @ Ti
+
+
+@pytest.mark.parametrize("theta", [np.eye(2), THETA])
+def test_state_dependent_plant_part_is_enclosed_soundly(theta):
+    """``-cos q`` (in z: ``Theta A(Theta^{-1} z) Theta^{-1}``, all four entries) enters the box
+    bound through its batched enclosures; on 17f5740 ``decompose_jacobian`` returned ``None``.
+    The per-box bound is >= the sampled mu_2 of the true Jacobian on every box."""
+    mlp = _net(2)
+    s = learned_system(PEND, mlp, linear=np.array([[-1.0, -1.0]]))
+    z = s.transformed(theta)
+    Th = sp.Matrix(np.asarray(theta).tolist()).applyfunc(sp.Rational)
+    Ti = np.array(Th.inv().evalf(30).tolist(), dtype=float)
+    dec = decompose_jacobian(z.closed_loop_jacobian("learned"), z.states, system_mlps(z))
+    assert dec is not None and len(dec.varying) == (1 if theta is not THETA else 4)
+    sup = np.array(z.support)
+    Z = _sample(sup, 200)
+    np.testing.assert_allclose(
+        dec.evaluate(Z), _true_pend_z_jacobian(Z, np.asarray(theta), Ti, mlp), atol=FOLD_TOL
+    )
+    rng = np.random.default_rng(11)
+    boxes = []
+    for _ in range(40):
+        a, b = _sample(sup, 2, seed=int(rng.integers(1 << 30)))
+        w = rng.choice([1.0, 0.1, 0.01])
+        boxes.append(np.stack([np.minimum(a, a + w * (b - a)), np.maximum(a, a + w * (b - a))], 1))
+    ub, _, _ = box_bounds(dec, np.array(boxes), "mu2")
+    for k, bx in enumerate(boxes):
+        Zb = _sample(bx, N_SAMPLES // 40, seed=k)
+        mu = _mu2(_true_pend_z_jacobian(Zb, np.asarray(theta), Ti, mlp)).max()
+        assert mu <= ub[k] + SAMPLE_TOL
+    res = contraction_rate(
+        z.closed_loop_jacobian("learned"), z.states, sup, mlps=system_mlps(z), max_boxes=2000
+    )
+    assert res.method == "mlp-bnb"
+    assert (
+        _mu2(_true_pend_z_jacobian(_sample(sup, N_SAMPLES), np.asarray(theta), Ti, mlp)).max()
+        <= res.max_mu_upper + SAMPLE_TOL
+    )
+
+
+def test_a_nonsmooth_or_block_dependent_coefficient_is_not_decomposed():
+    """``|q|`` (no mean-value form) and a coefficient ``q`` on a block Jacobian entry are outside
+    the form: ``None``, the generic route runs."""
+    mlp = _net(2)
+    s = learned_system(OSC, mlp)
+    J = sp.Matrix(s.closed_loop_jacobian("learned"))
+    mlps = system_mlps(s)
+    assert decompose_jacobian(J + sp.Matrix([[sp.Abs(q), 0], [0, 0]]), s.states, mlps) is None
+    assert decompose_jacobian(J.applyfunc(lambda e: q * e), s.states, mlps) is None
+    assert decompose_jacobian(J, s.states, mlps) is not None

@@ -52,8 +52,9 @@ from __future__ import annotations
 import itertools
 import math
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import sympy as sp
@@ -71,6 +72,8 @@ from drip_cert.model.blocks import (
 from drip_cert.model.mlp import MLP
 from drip_cert.model.system import System
 from drip_cert.numerics.bnb_batch import BatchBnbResult, maximize_batch
+from drip_cert.numerics.interval import UnsupportedExpression, is_smooth
+from drip_cert.numerics.interval_batch import compile_batch
 from drip_cert.numerics.interval_np import mid_rad
 from drip_cert.numerics.rounding import (
     add_down_np,
@@ -115,6 +118,43 @@ OBJECTIVES = ("mu2", "norm2", "jac_lipschitz")
 _TINY = 2.0**-1074
 
 
+@dataclass(frozen=True, eq=False)
+class StatePart:
+    """A state-dependent entry ``a_ji(x)`` of the block-free part of ``M`` (no block in it, e.g.
+    ``-9.81 cos q`` of a pendulum): its batched interval enclosure and those of its partial
+    derivatives (:func:`~drip_cert.numerics.interval_batch.compile_batch`, sound over each box),
+    and a float evaluator for sampling (an estimate)."""
+
+    j: int
+    i: int
+    expr: sp.Expr
+    value: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]
+    grad: tuple[Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]], ...]
+    fn: Callable[..., Any]
+
+
+def _state_part(j: int, i: int, e: sp.Expr, x: tuple[sp.Symbol, ...]) -> StatePart | None:
+    """:class:`StatePart` of ``e`` (``None`` when ``e`` is not smooth, not real or has a node
+    without a batched enclosure: the caller then reads no decomposition)."""
+    if not is_smooth(e):
+        return None
+    try:
+        grads = [sp.diff(e, xi) for xi in x]
+        value = compile_batch(e, x)
+        grad = tuple(compile_batch(g, x) for g in grads)
+    except (UnsupportedExpression, TypeError, ValueError):
+        return None
+    return StatePart(j, i, e, value, grad, sp.lambdify(x, e, "numpy"))
+
+
+def _enclosed(f, boxes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``f(boxes)`` with NaN (no information) read as ``[-inf, inf]``."""
+    lo, hi = f(boxes)
+    lo = np.where(np.isnan(lo), -np.inf, np.broadcast_to(lo, boxes.shape[:1]))
+    hi = np.where(np.isnan(hi), np.inf, np.broadcast_to(hi, boxes.shape[:1]))
+    return lo, hi
+
+
 @dataclass(frozen=True)
 class JacobianInBlocks:
     """``M(x) = A + sum_k T_k : D h_k(x)``; ``A`` is ``(p, q)``, ``T[k]`` ``(p, q, out_k, d)``.
@@ -125,6 +165,8 @@ class JacobianInBlocks:
     weight when ``h_k`` is a network read through an input map, ``h_k(x) = N(S x)``, folded
     (:class:`~drip_cert.model.blocks.MappedMLP`): ``mlps[k]`` is the folded network, its first
     weight the float midpoint of ``W_0 S``, and every enclosure holds for the interval weight.
+    ``varying`` are the entries of the block-free part that depend on ``x`` (their ``A`` entry is
+    0): ``M(x) = A + sum_j a_ji(x) e_j e_i^T + sum_k T_k : D h_k(x)``.
     """
 
     A: np.ndarray
@@ -134,6 +176,7 @@ class JacobianInBlocks:
     mlps: tuple[MLP, ...]
     names: tuple[str, ...]
     first_rad: tuple[np.ndarray | None, ...] = ()
+    varying: tuple[StatePart, ...] = ()
 
     @property
     def dim(self) -> int:
@@ -148,6 +191,8 @@ class JacobianInBlocks:
         """Float ``M(x)`` at points ``X`` (``(N, d)``): an estimate, for sampling."""
         X = np.asarray(X, dtype=float)
         out = np.broadcast_to(self.A, (X.shape[0], *self.A.shape)).copy()
+        for part in self.varying:
+            out[:, part.j, part.i] += part.fn(*X.T)
         for T, mlp in zip(self.T, self.mlps):
             out += np.einsum("jiol,nol->nji", T, jacobian_np(mlp, X))
         return out
@@ -177,7 +222,11 @@ def _input_maps(
 
 
 def decompose_jacobian(
-    M: sp.MatrixBase, states: Sequence[sp.Symbol], mlps: Mapping[str, MLP]
+    M: sp.MatrixBase,
+    states: Sequence[sp.Symbol],
+    mlps: Mapping[str, MLP],
+    *,
+    state_part: bool = True,
 ) -> JacobianInBlocks | None:
     """Read ``M = A + sum_k T_k : D h_k(x)`` from a symbolic matrix, ``None`` when ``M`` is not of
     that form (an entry non-linear in the block Jacobian entries, depending on the state or on
@@ -188,7 +237,13 @@ def decompose_jacobian(
     docs/math/contraction.md section 5.4) is read as the folded network ``h(x) = N(S x)``
     (:class:`~drip_cert.model.blocks.MappedMLP`): its Jacobian entries in ``M`` are ``DN(S x)``,
     and ``DN(S x) = Dh(x) S^{-1}`` is substituted exactly (sympy) before ``T_k`` is read, so
-    ``M = A + sum_k T_k : Dh_k(x)`` with ``h_k`` the folded network (first weight an interval)."""
+    ``M = A + sum_k T_k : Dh_k(x)`` with ``h_k`` the folded network (first weight an interval).
+
+    The block-free part may depend on the state (``state_part=True``): an entry such as the
+    ``-9.81 cos q`` of a pendulum's Jacobian, smooth and with a batched interval enclosure
+    (:class:`StatePart`), enters the box bound with its enclosures at the centre and its
+    gradient's over the box, as the networks do; the block coefficients ``T_k`` must still be
+    constant."""
     M = sp.Matrix(M)
     x = tuple(states)
     apps: set[BlockFunction] = set()
@@ -231,21 +286,35 @@ def decompose_jacobian(
     }
     slots.update({dv: key for key, dv in folded.items()})
     dvars = list(slots)
-    for e in lin:
-        if e.free_symbols - set(dvars):
-            return None
-        try:
-            if not sp.Poly(e, *dvars).is_linear:
-                return None
-        except sp.PolynomialError:
-            return None
     p, q = M.shape
     d = len(x)
     zero = {v: 0 for v in dvars}
-    try:
-        A = np.array([[float(lin[j, i].xreplace(zero)) for i in range(q)] for j in range(p)])
-    except TypeError:
-        return None
+    A = np.zeros((p, q))
+    varying: list[StatePart] = []
+    for j in range(p):
+        for i in range(q):
+            e = lin[j, i]
+            if e.free_symbols - set(dvars) - set(x):
+                return None
+            e0 = e.xreplace(zero)
+            coef = [sp.diff(e, dv) for dv in dvars]
+            # linear in the block Jacobian entries with constant coefficients
+            if any(c.free_symbols for c in coef):
+                return None
+            if sp.expand(e - e0 - sum(c * dv for c, dv in zip(coef, dvars))) != 0:
+                return None
+            if e0.free_symbols:
+                if not state_part:
+                    return None
+                part = _state_part(j, i, e0, x)
+                if part is None:
+                    return None
+                varying.append(part)
+                continue
+            try:
+                A[j, i] = float(e0)
+            except TypeError:
+                return None
     names = tuple(sorted(maps))
     Ts = {b: np.zeros((p, q, mlps[b].out_dim, d)) for b in names}
     for z, (b, o, l_) in slots.items():
@@ -267,6 +336,7 @@ def decompose_jacobian(
         mlps=tuple(mapped[b].folded if b in mapped else mlps[b] for b in names),
         names=names,
         first_rad=tuple(mapped[b].rad0 if b in mapped else None for b in names),
+        varying=tuple(varying),
     )
 
 
@@ -322,6 +392,22 @@ def _combine(dec: JacobianInBlocks, lo: np.ndarray, hi: np.ndarray):
     jc_hi = np.broadcast_to(add_up_np(dec.A, dec.A_rad), (N, p, q))
     jv_lo, jv_hi = jc_lo, jc_hi
     hc_lo = hc_hi = hb_lo = hb_hi = np.zeros((N, p, q, d))
+    if dec.varying:
+        # the block-free entries that depend on x: value at the centre, gradient at the centre
+        # and over the box (mean-value form, as for a smooth network)
+        c = mid_rad(lo, hi)[0]
+        cb = np.stack([c, c], axis=-1)
+        bb = np.stack([lo, hi], axis=-1)
+        jc_lo, jc_hi = jc_lo.copy(), jc_hi.copy()
+        hc_lo, hc_hi, hb_lo, hb_hi = (np.zeros((N, p, q, d)) for _ in range(4))
+        for part in dec.varying:
+            vlo, vhi = _enclosed(part.value, cb)
+            jc_lo[:, part.j, part.i] = add_down_np(jc_lo[:, part.j, part.i], vlo)
+            jc_hi[:, part.j, part.i] = add_up_np(jc_hi[:, part.j, part.i], vhi)
+            for l_, g in enumerate(part.grad):
+                hc_lo[:, part.j, part.i, l_], hc_hi[:, part.j, part.i, l_] = _enclosed(g, cb)
+                hb_lo[:, part.j, part.i, l_], hb_hi[:, part.j, part.i, l_] = _enclosed(g, bb)
+        jv_lo, jv_hi = jc_lo, jc_hi
     for k, (T, T_rad, mlp) in enumerate(zip(dec.T, dec.T_rad, dec.mlps)):
         box, cen = enclose_box_and_centre(mlp, lo, hi, hessian=mlp.smooth, first_rad=dec.rad0(k))
         o = mlp.out_dim
