@@ -12,7 +12,11 @@ import numpy as np
 import pytest
 import sympy as sp
 
-from drip_cert.analysis.contraction.learned_loop import slope_lmi_rate_global
+from drip_cert.analysis.contraction.learned_loop import (
+    difference_jacobian_bound,
+    lipschitz_rate,
+    slope_lmi_rate_global,
+)
 from drip_cert.analysis.contraction.mlp_loop import box_bounds, decompose_jacobian, system_mlps
 from drip_cert.analysis.contraction.rate import contraction_rate
 from drip_cert.analysis.contraction.slope_lmi import (
@@ -323,3 +327,17 @@ def test_a_nonsmooth_or_block_dependent_coefficient_is_not_decomposed():
     assert decompose_jacobian(J + sp.Matrix([[sp.Abs(q), 0], [0, 0]]), s.states, mlps) is None
     assert decompose_jacobian(J.applyfunc(lambda e: q * e), s.states, mlps) is None
     assert decompose_jacobian(J, s.states, mlps) is not None
+
+
+def test_lipschitz_routes_read_the_input_map():
+    """The closed-form global routes in z: ``||C_k|| Lip(N) ||Theta^{-1}||`` for ``N(Theta^{-1} z)``
+    (on 17f5740 both returned ``None`` in z); each bound holds at sampled z far from the support."""
+    _, z, theta, Ti, mlp = _systems()
+    g = lipschitz_rate(z, "learned")
+    d = difference_jacobian_bound(z)
+    assert g is not None and d is not None and g.rate.scope.all_x
+    Z = 50.0 * (_sample(np.array([[-1.0, 1.0], [-1.0, 1.0]]), N_SAMPLES) ** 3)
+    assert _mu2(_true_z_jacobian(Z, theta, Ti, mlp)).max() <= -g.rate.value + SAMPLE_TOL
+    # D_z (pi_IL - pi*) = (K + DN(Theta^{-1} z)) Theta^{-1} - K_expert Theta^{-1} = DN(.) Theta^{-1}
+    DD = jacobian_np(mlp, Z @ Ti.T) @ Ti
+    assert np.linalg.norm(DD, ord=2, axis=(-2, -1)).max() <= d.value + SAMPLE_TOL
