@@ -24,12 +24,13 @@ from drip_cert.analysis.contraction.slope_lmi import (
     slope_lmi_rate,
     slope_structure,
 )
-from drip_cert.analysis.growth.closed_loop import affine_in_blocks
+from drip_cert.analysis.growth.closed_loop import affine_in_blocks, closed_loop_constants
 from drip_cert.analysis.networks.mlp import jacobian_np
 from drip_cert.learn.imitation import learned_system
 from drip_cert.model.blocks import MappedMLP, linear_input_map
 from drip_cert.model.mlp import MLP, init_mlp
 from drip_cert.model.system import System
+from drip_cert.provenance import GLOBAL, How, Quantity
 
 #: float mu_2 of a sampled z-Jacobian (Theta J Theta^{-1} in floats) vs a rigorous bound:
 #: the float products and eigvalsh err by O(n eps ||Theta|| ||J|| ||Theta^{-1}||)
@@ -341,3 +342,21 @@ def test_lipschitz_routes_read_the_input_map():
     # D_z (pi_IL - pi*) = (K + DN(Theta^{-1} z)) Theta^{-1} - K_expert Theta^{-1} = DN(.) Theta^{-1}
     DD = jacobian_np(mlp, Z @ Ti.T) @ Ti
     assert np.linalg.norm(DD, ord=2, axis=(-2, -1)).max() <= d.value + SAMPLE_TOL
+
+
+def test_closed_loop_growth_constants_are_sound_in_z():
+    """``Delta_f`` and ``L_f`` of the z-loop: on 17f5740 ``N(Theta^{-1} z)`` was no block there,
+    so ``Delta_f`` fell back to a sampled ratio (an estimate); now both are sound and hold at
+    sampled z (``||F(z)|| <= Delta_f sqrt(1 + ||z||^2)``, ``||DF(z)|| <= L_f``)."""
+    _, z, theta, Ti, mlp = _systems()
+    lam = Quantity.derive("lambda", 0.1, method=How.SOUND, source="test", scope=GLOBAL)
+    cl = closed_loop_constants(z, "learned", lam, True)
+    assert cl.Delta_f.how == How.SOUND and cl.L_f.how == How.SOUND
+    Z = 50.0 * (_sample(np.array([[-1.0, 1.0], [-1.0, 1.0]]), N_SAMPLES) ** 3)
+    X = Z @ Ti.T
+    Fx = np.stack([X[:, 1], -2.0 * X[:, 0] - 1.5 * X[:, 1] + mlp.apply_np(X)[:, 0]], axis=1)
+    Fz = Fx @ theta.T
+    ratio = np.linalg.norm(Fz, axis=1) / np.sqrt(1.0 + np.sum(Z**2, axis=1))
+    assert ratio.max() <= cl.Delta_f.value * (1.0 + SAMPLE_TOL)
+    Jz = _true_z_jacobian(Z, theta, Ti, mlp)
+    assert np.linalg.norm(Jz, ord=2, axis=(-2, -1)).max() <= cl.L_f.value + SAMPLE_TOL

@@ -474,7 +474,9 @@ def closed_loop_constants(
     F = s.closed_loop(which)
     box = np.array(s.support, dtype=float)
     r0 = _box_radius_up(box)
-    dec = affine_in_blocks(F, s)
+    # a block read through an input map, h(S a) (e.g. N(Theta^{-1} z)): sup||h(S a)|| <= sup||h||,
+    # h(S 0) = h(0), Lip(h o S) <= Lip(h) ||S||_2
+    dec = affine_in_blocks(F, s, input_maps=True)
     src_f = "L1-DRAC Assumption 1 (nominal drift = closed loop under the policy)"
     src_l = "L1-DRAC Assumption 8"
     src_s = "L1-DRAC Assumption 3"
@@ -492,7 +494,11 @@ def closed_loop_constants(
             Lh = lipschitz_bound(mlp)
             lips.append(Lh)
             beta = add_up(beta, mul_up(nC, mlp_output_bound(mlp)))
-            lip = add_up(lip, mul_up(nC, Lh.value))
+            term = mul_up(nC, Lh.value)
+            if b in dec.S:  # S exact: float() correctly rounded, within CONVERSION_ULPS spacings
+                S = np.array([[float(e) for e in row] for row in dec.S[b].tolist()])
+                term = mul_up(term, _norm_of_converted(S, spectral=True))
+            lip = add_up(lip, term)
         dF = Quantity.derive(
             "Delta_f",
             sqrt_up(add_up(sq_up(nA), sq_up(beta))),
@@ -507,7 +513,8 @@ def closed_loop_constants(
             inputs=lips,
             method=How.SOUND,
             source=src_l,
-            note="||A|| + sum ||C|| Lip(h) (spectral-norm product bound of each MLP)",
+            note="||A|| + sum ||C|| Lip(h) (spectral-norm product bound of each MLP; times "
+            "||S|| for a block applied to S a)",
         )
         F0 = _f_at_zero_up(dec, s)
         global_ok = global_rate and lam.how.proved
