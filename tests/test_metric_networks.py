@@ -136,6 +136,7 @@ def test_input_map_is_read_exactly_from_the_z_system():
     fn = type(app)
     assert linear_input_map(fn(z.states[0] + 1, z.states[1]), z.states) is None
     assert linear_input_map(fn(sp.sin(z.states[0]), z.states[1]), z.states) is None
+    assert linear_input_map(fn(sp.sqrt(2) * z.states[0], z.states[1]), z.states) is None
 
 
 # ------------------------------------------------------------------ the batched box bound in z

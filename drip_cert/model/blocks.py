@@ -187,8 +187,8 @@ def block_applications(expr: sp.Basic) -> set[BlockFunction]:
 
 def linear_input_map(app: BlockFunction, states: Sequence[sp.Symbol]) -> sp.ImmutableMatrix | None:
     """The constant matrix ``S`` with ``app.args == S @ states`` exactly (``None`` when an
-    argument is not a linear form of the states with numeric coefficients, e.g. it has an offset,
-    a parameter or a nonlinearity).
+    argument is not a linear form of the states with rational coefficients, e.g. it has an
+    offset, a parameter, an irrational coefficient or a nonlinearity).
 
     A block of a system in the coordinates ``z = Theta x`` is applied to ``Theta^{-1} z``
     (:meth:`~drip_cert.model.system.System.transformed`): there ``S = Theta^{-1}``, exact
@@ -201,7 +201,7 @@ def linear_input_map(app: BlockFunction, states: Sequence[sp.Symbol]) -> sp.Immu
         if not isinstance(a, sp.Expr) or a.free_symbols - set(x):
             return None
         row = [sp.diff(a, xi) for xi in x]
-        if any(not (c.is_number and c.is_real) for c in row):
+        if any(not c.is_Rational for c in row):  # exact rationals only (MappedMLP folds them)
             return None
         if sp.expand(a - sum(c * xi for c, xi in zip(row, x))) != 0:
             return None
