@@ -20,6 +20,7 @@ from drip_cert.analysis.contraction.learned_loop import (
 from drip_cert.analysis.contraction.mlp_loop import box_bounds, decompose_jacobian, system_mlps
 from drip_cert.analysis.contraction.rate import contraction_rate
 from drip_cert.analysis.contraction.slope_lmi import (
+    box_slope_bnb,
     sampled_slopes,
     slope_lmi_rate,
     slope_structure,
@@ -361,3 +362,16 @@ def test_closed_loop_growth_constants_are_sound_in_z():
     assert ratio.max() <= cl.Delta_f.value * (1.0 + SAMPLE_TOL)
     Jz = _true_z_jacobian(Z, theta, Ti, mlp)
     assert np.linalg.norm(Jz, ord=2, axis=(-2, -1)).max() <= cl.L_f.value + SAMPLE_TOL
+
+
+def test_box_slope_bound_in_z_holds_at_sampled_points():
+    """The per-box slope LMI in z (slope ranges from the folded first layer's interval
+    pre-activations) bounds mu_2 of the true z-Jacobian on the box."""
+    _, z, theta, Ti, mlp = _systems()
+    dec = affine_in_blocks(z.closed_loop("learned"), z, input_maps=True)
+    assert dec is not None
+    box = np.array(z.support)
+    res = box_slope_bnb(dec, system_mlps(z), box, target=-10.0, max_boxes=5)
+    assert np.isfinite(res.max_mu_upper)
+    mu = _mu2(_true_z_jacobian(_sample(box, N_SAMPLES), theta, Ti, mlp)).max()
+    assert mu <= res.max_mu_upper + SAMPLE_TOL
