@@ -11,8 +11,9 @@ so sympy's chain rule builds closed-loop Jacobians that contain blocks, and
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
+from fractions import Fraction
 from pathlib import Path
 from typing import Any, ClassVar, TypeAlias
 
@@ -182,3 +183,104 @@ def load_mlp_block(
 def block_applications(expr: sp.Basic) -> set[BlockFunction]:
     """All applied block functions occurring in ``expr``."""
     return {a for a in expr.atoms(sp.Function) if isinstance(a, BlockFunction)}
+
+
+def linear_input_map(app: BlockFunction, states: Sequence[sp.Symbol]) -> sp.ImmutableMatrix | None:
+    """The constant matrix ``S`` with ``app.args == S @ states`` exactly (``None`` when an
+    argument is not a linear form of the states with rational coefficients, e.g. it has an
+    offset, a parameter, an irrational coefficient or a nonlinearity).
+
+    A block of a system in the coordinates ``z = Theta x`` is applied to ``Theta^{-1} z``
+    (:meth:`~drip_cert.model.system.System.transformed`): there ``S = Theta^{-1}``, exact
+    rationals.
+    """
+    x = list(states)
+    rows = []
+    for a in app.args:
+        a = sp.expand(a)
+        if not isinstance(a, sp.Expr) or a.free_symbols - set(x):
+            return None
+        row = [sp.diff(a, xi) for xi in x]
+        if any(not c.is_Rational for c in row):  # exact rationals only (MappedMLP folds them)
+            return None
+        if sp.expand(a - sum(c * xi for c, xi in zip(row, x))) != 0:
+            return None
+        rows.append(row)
+    return sp.ImmutableMatrix(rows)
+
+
+def _fraction(v: Any) -> Fraction:
+    """The exact rational of a float or a sympy rational (``TypeError`` for anything else)."""
+    if isinstance(v, float | int | np.floating | np.integer):
+        return Fraction(float(v)) if isinstance(v, float | np.floating) else Fraction(int(v))
+    e = sp.sympify(v)
+    if not e.is_Rational:
+        raise TypeError(f"{v!r} is not a rational number")
+    return Fraction(int(e.p), int(e.q))
+
+
+def _float_up(q: Fraction) -> float:
+    """The smallest float ``>= q`` (``Fraction.__float__`` rounds to nearest: step up once when
+    it landed below)."""
+    f = float(q)
+    return f if Fraction(f) >= q else float(np.nextafter(f, np.inf))
+
+
+@dataclass(frozen=True, eq=False)
+class MappedMLP:
+    """A network read through a constant input map: ``y -> mlp(S y)`` (docs/math/contraction.md
+    section 5.4).
+
+    ``S`` (``(mlp.in_dim, d)``, exact rationals) is folded into the first layer:
+    ``folded`` is ``mlp`` with first weight ``W_0'`` = the float nearest to each entry of the
+    exact product ``W_0 S`` (the float ``W_0`` read as the binary rationals it stores, the sums
+    formed in exact rational arithmetic), and ``rad0`` bounds the rounding entrywise,
+    ``|W_0 S - W_0'| <= rad0`` (rounded up). So ``mlp(S y)`` is the network ``folded`` with its
+    first weight anywhere in ``[W_0' - rad0, W_0' + rad0]``: an analysis that encloses the first
+    layer with that interval weight is sound for ``mlp(S y)``; one that reads ``folded`` as exact
+    is not (it gets an estimate).
+    """
+
+    mlp: MLP
+    S: sp.ImmutableMatrix
+    folded: MLP = field(init=False, repr=False)
+    rad0: np.ndarray = field(init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        S = sp.ImmutableMatrix(self.S)
+        if S.shape[0] != self.mlp.in_dim:
+            raise SpecError(
+                f"an input map for a network with {self.mlp.in_dim} inputs must have "
+                f"{self.mlp.in_dim} rows, got {S.shape[0]}"
+            )
+        Sq = [[_fraction(S[i, j]) for j in range(S.shape[1])] for i in range(S.shape[0])]
+        W = self.mlp.weights[0]
+        m, k = W.shape
+        d = S.shape[1]
+        mid = np.empty((m, d))
+        rad = np.empty((m, d))
+        for r in range(m):
+            wr = [Fraction(float(w)) for w in W[r]]
+            for c in range(d):
+                exact = sum((wr[i] * Sq[i][c] for i in range(k)), Fraction(0))
+                mid[r, c] = float(exact)  # correctly rounded (nearest)
+                rad[r, c] = _float_up(abs(exact - Fraction(float(mid[r, c]))))
+        folded = MLP(
+            weights=(mid, *self.mlp.weights[1:]),
+            biases=self.mlp.biases,
+            activations=self.mlp.activations,
+        )
+        rad.setflags(write=False)
+        object.__setattr__(self, "S", S)
+        object.__setattr__(self, "folded", folded)
+        object.__setattr__(self, "rad0", rad)
+
+    @property
+    def in_dim(self) -> int:
+        """``d``, the dimension of ``y``."""
+        return int(self.S.shape[1])
+
+    @property
+    def exact(self) -> bool:
+        """Whether the fold is exact (every ``W_0 S`` entry a float: ``rad0 == 0``)."""
+        return not bool(np.any(self.rad0))

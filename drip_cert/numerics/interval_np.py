@@ -38,6 +38,7 @@ from drip_cert.numerics.rounding import (
 __all__ = [
     "Phi_bounds",
     "affine_enclosure",
+    "affine_enclosure_rad",
     "exp_bounds",
     "iadd",
     "imul",
@@ -86,6 +87,26 @@ def affine_enclosure(w: np.ndarray, b: np.ndarray, lo: np.ndarray, hi: np.ndarra
         up_np(2.0 * gamma(k + 2) * ((np.abs(m) + r) @ aw.T + np.abs(b))), (k + 2) * 8 * TINY
     )
     return sub_down_np(sub_down_np(c, rad), err), add_up_np(add_up_np(c, rad), err)
+
+
+def affine_enclosure_rad(
+    w: np.ndarray, w_rad: np.ndarray | None, b: np.ndarray, lo: np.ndarray, hi: np.ndarray
+):
+    """Enclosure of ``W z + b`` for ``z`` in the box ``[lo, hi]`` and every ``W`` with
+    ``|W - w| <= w_rad`` entrywise (``w_rad=None``: ``W = w``, :func:`affine_enclosure`).
+
+    ``W z = w z + (W - w) z`` with ``|(W - w) z| <= w_rad |z|_max``, ``|z|_max`` the entrywise
+    ``max(|lo|, |hi|)``; the float product of ``k`` non-negative terms is within ``gamma_k`` of
+    the exact one, so ``1 + 2 gamma_{k+1}`` times it plus an underflow term covers it.
+    """
+    olo, ohi = affine_enclosure(w, b, lo, hi)
+    if w_rad is None:
+        return olo, ohi
+    mag = np.maximum(np.abs(lo), np.abs(hi))
+    k = w.shape[1]
+    e = mag @ np.asarray(w_rad, dtype=float).T
+    e = add_up_np(up_np(e * (1.0 + 2.0 * gamma(k + 1))), k * 8 * TINY)
+    return sub_down_np(olo, e), add_up_np(ohi, e)
 
 
 def matmul_point_left(w: np.ndarray, jlo: np.ndarray, jhi: np.ndarray):

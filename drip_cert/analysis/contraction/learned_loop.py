@@ -153,10 +153,11 @@ LipMemo = dict[str, Quantity | None]
 def _affine_and_block_sum(
     s: System, expr: sp.ImmutableMatrix, memo: LipMemo | None
 ) -> tuple[AffineBlocks, float, list[Quantity]] | None:
-    """``expr = A x + c + sum_k C_k h_k(x)`` and ``sum_k ||C_k||_2 Lip(h_k)`` (rounded up) with the
-    Lipschitz constants it used, or ``None`` when ``expr`` is not affine in MLP blocks of ``x`` or
-    a block has no finite constant (:func:`_blocks_sum`)."""
-    dec = affine_in_blocks(expr, s)
+    """``expr = A x + c + sum_k C_k h_k(S_k x)`` and ``sum_k ||C_k||_2 Lip(h_k) ||S_k||_2`` (rounded
+    up) with the Lipschitz constants it used, or ``None`` when ``expr`` is not affine in MLP blocks
+    of ``x`` (or of a constant linear map ``S_k x`` of it, e.g. ``N(Theta^{-1} z)``) or a block has
+    no finite constant (:func:`_blocks_sum`)."""
+    dec = affine_in_blocks(expr, s, input_maps=True)
     if dec is None:
         return None
     parts = _blocks_sum(s, dec, memo)
@@ -169,7 +170,8 @@ def _affine_and_block_sum(
 def _blocks_sum(
     s: System, dec: AffineBlocks, memo: LipMemo | None = None
 ) -> tuple[float, list[Quantity]] | None:
-    """``sum_k ||C_k||_2 L_k`` rounded up, and the Lipschitz quantities; ``None`` when a block is
+    """``sum_k ||C_k||_2 L_k ||S_k||_2`` rounded up (``||S_k||_2 = 1`` without an input map: the
+    chain rule ``D(h o S) = Dh(S x) S``), and the Lipschitz quantities; ``None`` when a block is
     not an MLP (no certified Lipschitz constant). ``memo`` keeps each block's constant."""
     memo = {} if memo is None else memo
     total = 0.0
@@ -182,7 +184,12 @@ def _blocks_sum(
             return None
         lips.append(L)
         if np.any(C):
-            total = add_up(total, mul_up(_norm_up(C), L.value))
+            term = mul_up(_norm_up(C), L.value)
+            if name in dec.S:
+                # S exact: float() is correctly rounded, within CONVERSION_ULPS spacings
+                S = np.array([[float(e) for e in row] for row in dec.S[name].tolist()])
+                term = mul_up(term, _norm_up(S))
+            total = add_up(total, term)
     return total, lips
 
 
@@ -324,7 +331,9 @@ def slope_lmi_rate_global(
     t0 = time.perf_counter()
     if which == "learned" and s.learned is None:
         return None
-    dec = affine_in_blocks(s.closed_loop(which), s)
+    # a block read through a constant input map (N(Theta^{-1} z) in a metric's coordinates) is
+    # folded into its first layer by slope_structure
+    dec = affine_in_blocks(s.closed_loop(which), s, input_maps=True)
     if dec is None or not dec.C or any(s.blocks[b].mlp is None for b in dec.C):
         return None
     mlps = {b: s.blocks[b].mlp for b in dec.C}
@@ -345,8 +354,11 @@ def slope_lmi_rate_global(
         "verified in Arb (docs/math/contraction.md section 11)",
         scope=GLOBAL,
     )
+    folded = f" (input maps folded into the first layer: {', '.join(sorted(dec.S))})"
     note = (
-        f"{st.N} neurons, LMI size {st.dim}, {res.reason}; trace condition tr J(s)/n <= "
+        f"{st.N} neurons, LMI size {st.dim}, {res.reason}"
+        + (folded if dec.S else "")
+        + "; trace condition tr J(s)/n <= "
         f"{res.obstruction.mean_eigenvalue:.4g} at the worst slope vertex found"
     )
     return GlobalRate(_result(rate, "slope-lmi", note, t0), rate, ())

@@ -52,8 +52,9 @@ from __future__ import annotations
 import itertools
 import math
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import sympy as sp
@@ -62,10 +63,17 @@ from drip_cert.analysis.growth.closed_loop import CONVERSION_ULPS
 from drip_cert.analysis.networks.mlp import jacobian_np
 from drip_cert.analysis.networks.mlp.derivatives import enclose_box_and_centre
 from drip_cert.errors import SpecError
-from drip_cert.model.blocks import BlockFunction, block_applications
+from drip_cert.model.blocks import (
+    BlockFunction,
+    MappedMLP,
+    block_applications,
+    linear_input_map,
+)
 from drip_cert.model.mlp import MLP
 from drip_cert.model.system import System
 from drip_cert.numerics.bnb_batch import BatchBnbResult, maximize_batch
+from drip_cert.numerics.interval import UnsupportedExpression, is_smooth
+from drip_cert.numerics.interval_batch import compile_batch
 from drip_cert.numerics.interval_np import mid_rad
 from drip_cert.numerics.rounding import (
     add_down_np,
@@ -110,13 +118,55 @@ OBJECTIVES = ("mu2", "norm2", "jac_lipschitz")
 _TINY = 2.0**-1074
 
 
+@dataclass(frozen=True, eq=False)
+class StatePart:
+    """A state-dependent entry ``a_ji(x)`` of the block-free part of ``M`` (no block in it, e.g.
+    ``-9.81 cos q`` of a pendulum): its batched interval enclosure and those of its partial
+    derivatives (:func:`~drip_cert.numerics.interval_batch.compile_batch`, sound over each box),
+    and a float evaluator for sampling (an estimate)."""
+
+    j: int
+    i: int
+    expr: sp.Expr
+    value: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]
+    grad: tuple[Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]], ...]
+    fn: Callable[..., Any]
+
+
+def _state_part(j: int, i: int, e: sp.Expr, x: tuple[sp.Symbol, ...]) -> StatePart | None:
+    """:class:`StatePart` of ``e`` (``None`` when ``e`` is not smooth, not real or has a node
+    without a batched enclosure: the caller then reads no decomposition)."""
+    if not is_smooth(e):
+        return None
+    try:
+        grads = [sp.diff(e, xi) for xi in x]
+        value = compile_batch(e, x)
+        grad = tuple(compile_batch(g, x) for g in grads)
+    except (UnsupportedExpression, TypeError, ValueError):
+        return None
+    return StatePart(j, i, e, value, grad, sp.lambdify(x, e, "numpy"))
+
+
+def _enclosed(f, boxes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``f(boxes)`` with NaN (no information) read as ``[-inf, inf]``."""
+    lo, hi = f(boxes)
+    lo = np.where(np.isnan(lo), -np.inf, np.broadcast_to(lo, boxes.shape[:1]))
+    hi = np.where(np.isnan(hi), np.inf, np.broadcast_to(hi, boxes.shape[:1]))
+    return lo, hi
+
+
 @dataclass(frozen=True)
 class JacobianInBlocks:
     """``M(x) = A + sum_k T_k : D h_k(x)``; ``A`` is ``(p, q)``, ``T[k]`` ``(p, q, out_k, d)``.
 
     ``A_rad``, ``T_rad`` bound the distance of the float coefficients to the exact ones
     (:data:`~drip_cert.analysis.growth.closed_loop.CONVERSION_ULPS` spacings of the sympy
-    constants).
+    constants). ``first_rad[k]`` (``None``: exact) is the radius of ``mlps[k]``'s first-layer
+    weight when ``h_k`` is a network read through an input map, ``h_k(x) = N(S x)``, folded
+    (:class:`~drip_cert.model.blocks.MappedMLP`): ``mlps[k]`` is the folded network, its first
+    weight the float midpoint of ``W_0 S``, and every enclosure holds for the interval weight.
+    ``varying`` are the entries of the block-free part that depend on ``x`` (their ``A`` entry is
+    0): ``M(x) = A + sum_j a_ji(x) e_j e_i^T + sum_k T_k : D h_k(x)``.
     """
 
     A: np.ndarray
@@ -125,28 +175,75 @@ class JacobianInBlocks:
     T_rad: tuple[np.ndarray, ...]
     mlps: tuple[MLP, ...]
     names: tuple[str, ...]
+    first_rad: tuple[np.ndarray | None, ...] = ()
+    varying: tuple[StatePart, ...] = ()
 
     @property
     def dim(self) -> int:
         """``d``, the state dimension."""
         return int(self.mlps[0].in_dim) if self.mlps else 0
 
+    def rad0(self, k: int) -> np.ndarray | None:
+        """The first-layer weight radius of block ``k`` (``None``: exact)."""
+        return self.first_rad[k] if k < len(self.first_rad) else None
+
     def evaluate(self, X: np.ndarray) -> np.ndarray:
         """Float ``M(x)`` at points ``X`` (``(N, d)``): an estimate, for sampling."""
         X = np.asarray(X, dtype=float)
         out = np.broadcast_to(self.A, (X.shape[0], *self.A.shape)).copy()
+        for part in self.varying:
+            out[:, part.j, part.i] += part.fn(*X.T)
         for T, mlp in zip(self.T, self.mlps):
             out += np.einsum("jiol,nol->nji", T, jacobian_np(mlp, X))
         return out
 
 
+def _input_maps(
+    apps: set[BlockFunction], x: tuple[sp.Symbol, ...], mlps: Mapping[str, MLP]
+) -> dict[str, sp.ImmutableMatrix | None] | None:
+    """Per block name, its input map ``S`` (``None``: applied to the state itself), or ``None``
+    when a block is applied to anything but ``S x`` with one constant invertible square ``S``."""
+    maps: dict[str, sp.ImmutableMatrix | None] = {}
+    for a in apps:
+        if a.args == x:
+            S = None
+        else:
+            S = linear_input_map(a, x)
+            if S is None or S.shape != (len(x), len(x)) or S.det() == 0:
+                return None
+            if S == sp.eye(len(x)):
+                S = None
+        if a.block_name in maps and maps[a.block_name] != S:
+            return None
+        maps[a.block_name] = S
+    if any(S is not None and mlps[b].in_dim != len(x) for b, S in maps.items()):
+        return None
+    return maps
+
+
 def decompose_jacobian(
-    M: sp.MatrixBase, states: Sequence[sp.Symbol], mlps: Mapping[str, MLP]
+    M: sp.MatrixBase,
+    states: Sequence[sp.Symbol],
+    mlps: Mapping[str, MLP],
+    *,
+    state_part: bool = True,
 ) -> JacobianInBlocks | None:
     """Read ``M = A + sum_k T_k : D h_k(x)`` from a symbolic matrix, ``None`` when ``M`` is not of
     that form (an entry non-linear in the block Jacobian entries, depending on the state or on
-    other symbols, a block value or Hessian entry, a block not applied to the state in order, a
-    block without an MLP)."""
+    other symbols, a block value or Hessian entry, a block without an MLP, a block applied to
+    anything but the state or a constant invertible linear map of it).
+
+    A block applied to ``S x`` (e.g. ``N(Theta^{-1} z)`` in the coordinates of a metric,
+    docs/math/contraction.md section 5.4) is read as the folded network ``h(x) = N(S x)``
+    (:class:`~drip_cert.model.blocks.MappedMLP`): its Jacobian entries in ``M`` are ``DN(S x)``,
+    and ``DN(S x) = Dh(x) S^{-1}`` is substituted exactly (sympy) before ``T_k`` is read, so
+    ``M = A + sum_k T_k : Dh_k(x)`` with ``h_k`` the folded network (first weight an interval).
+
+    The block-free part may depend on the state (``state_part=True``): an entry such as the
+    ``-9.81 cos q`` of a pendulum's Jacobian, smooth and with a batched interval enclosure
+    (:class:`StatePart`), enters the box bound with its enclosures at the centre and its
+    gradient's over the box, as the networks do; the block coefficients ``T_k`` must still be
+    constant."""
     M = sp.Matrix(M)
     x = tuple(states)
     apps: set[BlockFunction] = set()
@@ -155,45 +252,91 @@ def decompose_jacobian(
     if not apps:
         return None
     for a in apps:
-        if len(a.deriv) != 1 or a.args != x or a.block_name not in mlps:
+        if len(a.deriv) != 1 or a.block_name not in mlps:
             return None
+    maps = _input_maps(apps, x, mlps)
+    if maps is None:
+        return None
     dummies = {a: sp.Dummy(f"d{type(a).__name__}") for a in apps}
-    lin = M.xreplace(dummies).applyfunc(sp.expand)
-    dvars = list(dummies.values())
-    for e in lin:
-        if e.free_symbols - set(dvars):
-            return None
-        try:
-            if not sp.Poly(e, *dvars).is_linear:
-                return None
-        except sp.PolynomialError:
-            return None
+    lin = M.xreplace(dummies)
+    # the folded blocks' Jacobian entries: d'_{o, m} = (DN(S x) S)_{o, m} = Dh(x)_{o, m}
+    folded: dict[tuple[str, int, int], sp.Dummy] = {}
+    subs: dict[sp.Dummy, sp.Expr] = {}
+    for a, dv in dummies.items():
+        S = maps[a.block_name]
+        if S is None:
+            continue
+        Si = S.inv()
+        o, l_ = a.out_index, a.deriv[0]
+        terms = []
+        for m in range(len(x)):
+            key = (a.block_name, o, m)
+            if key not in folded:
+                folded[key] = sp.Dummy(f"f{a.block_name}_{o}_{m}")
+            terms.append(folded[key] * Si[m, l_])
+        subs[dv] = sp.Add(*terms)
+    if subs:
+        lin = lin.xreplace(subs)
+    lin = lin.applyfunc(sp.expand)
+    # (block, out, in) -> the variable of M's linear form
+    slots: dict[sp.Dummy, tuple[str, int, int]] = {
+        dv: (a.block_name, a.out_index, a.deriv[0])
+        for a, dv in dummies.items()
+        if maps[a.block_name] is None
+    }
+    slots.update({dv: key for key, dv in folded.items()})
+    dvars = list(slots)
     p, q = M.shape
     d = len(x)
     zero = {v: 0 for v in dvars}
-    try:
-        A = np.array([[float(lin[j, i].xreplace(zero)) for i in range(q)] for j in range(p)])
-    except TypeError:
-        return None
-    names = tuple(sorted({a.block_name for a in apps}))
+    A = np.zeros((p, q))
+    varying: list[StatePart] = []
+    for j in range(p):
+        for i in range(q):
+            e = lin[j, i]
+            if e.free_symbols - set(dvars) - set(x):
+                return None
+            e0 = e.xreplace(zero)
+            coef = [sp.diff(e, dv) for dv in dvars]
+            # linear in the block Jacobian entries with constant coefficients
+            if any(c.free_symbols for c in coef):
+                return None
+            if sp.expand(e - e0 - sum(c * dv for c, dv in zip(coef, dvars))) != 0:
+                return None
+            if e0.free_symbols:
+                if not state_part:
+                    return None
+                part = _state_part(j, i, e0, x)
+                if part is None:
+                    return None
+                varying.append(part)
+                continue
+            try:
+                A[j, i] = float(e0)
+            except TypeError:
+                return None
+    names = tuple(sorted(maps))
     Ts = {b: np.zeros((p, q, mlps[b].out_dim, d)) for b in names}
-    for a, z in dummies.items():
-        T = Ts[a.block_name]
+    for z, (b, o, l_) in slots.items():
+        T = Ts[b]
         for j in range(p):
             for i in range(q):
-                T[j, i, a.out_index, a.deriv[0]] = float(sp.diff(lin[j, i], z))
+                T[j, i, o, l_] = float(sp.diff(lin[j, i], z))
     if not all(np.all(np.isfinite(T)) for T in Ts.values()) or not np.all(np.isfinite(A)):
         return None
     # float() is exact for binary floats, correctly rounded for rationals, within an ulp else
     A_rad = CONVERSION_ULPS * np.spacing(np.abs(A))
     Tt = tuple(Ts[b] for b in names)
+    mapped = {b: MappedMLP(mlps[b], S) for b, S in maps.items() if S is not None}
     return JacobianInBlocks(
         A=A,
         A_rad=A_rad,
         T=Tt,
         T_rad=tuple(CONVERSION_ULPS * np.spacing(np.abs(T)) for T in Tt),
-        mlps=tuple(mlps[b] for b in names),
+        mlps=tuple(mapped[b].folded if b in mapped else mlps[b] for b in names),
         names=names,
+        first_rad=tuple(mapped[b].rad0 if b in mapped else None for b in names),
+        varying=tuple(varying),
     )
 
 
@@ -249,8 +392,24 @@ def _combine(dec: JacobianInBlocks, lo: np.ndarray, hi: np.ndarray):
     jc_hi = np.broadcast_to(add_up_np(dec.A, dec.A_rad), (N, p, q))
     jv_lo, jv_hi = jc_lo, jc_hi
     hc_lo = hc_hi = hb_lo = hb_hi = np.zeros((N, p, q, d))
-    for T, T_rad, mlp in zip(dec.T, dec.T_rad, dec.mlps):
-        box, cen = enclose_box_and_centre(mlp, lo, hi, hessian=mlp.smooth)
+    if dec.varying:
+        # the block-free entries that depend on x: value at the centre, gradient at the centre
+        # and over the box (mean-value form, as for a smooth network)
+        c = mid_rad(lo, hi)[0]
+        cb = np.stack([c, c], axis=-1)
+        bb = np.stack([lo, hi], axis=-1)
+        jc_lo, jc_hi = jc_lo.copy(), jc_hi.copy()
+        hc_lo, hc_hi, hb_lo, hb_hi = (np.zeros((N, p, q, d)) for _ in range(4))
+        for part in dec.varying:
+            vlo, vhi = _enclosed(part.value, cb)
+            jc_lo[:, part.j, part.i] = add_down_np(jc_lo[:, part.j, part.i], vlo)
+            jc_hi[:, part.j, part.i] = add_up_np(jc_hi[:, part.j, part.i], vhi)
+            for l_, g in enumerate(part.grad):
+                hc_lo[:, part.j, part.i, l_], hc_hi[:, part.j, part.i, l_] = _enclosed(g, cb)
+                hb_lo[:, part.j, part.i, l_], hb_hi[:, part.j, part.i, l_] = _enclosed(g, bb)
+        jv_lo, jv_hi = jc_lo, jc_hi
+    for k, (T, T_rad, mlp) in enumerate(zip(dec.T, dec.T_rad, dec.mlps)):
+        box, cen = enclose_box_and_centre(mlp, lo, hi, hessian=mlp.smooth, first_rad=dec.rad0(k))
         o = mlp.out_dim
         Tm, Tr = T.reshape(p * q, o * d), T_rad.reshape(p * q, o * d)
 

@@ -57,8 +57,9 @@ from drip_cert.analysis.contraction.lognorm import lambda_max_upper
 from drip_cert.analysis.growth.closed_loop import CONVERSION_ULPS, AffineBlocks
 from drip_cert.errors import SpecError
 from drip_cert.model.activations import Identity
+from drip_cert.model.blocks import MappedMLP
 from drip_cert.model.mlp import MLP
-from drip_cert.numerics.interval_np import affine_enclosure
+from drip_cert.numerics.interval_np import affine_enclosure_rad
 from drip_cert.numerics.rounding import arb_hi
 
 __all__ = [
@@ -106,6 +107,10 @@ class SlopeStructure:
     columns are ``A`` (for ``v``) and ``C_k W_L`` (or ``C_k`` for output neurons), kept as the
     parts ``A``, ``C_k``, ``W`` so that the Arb check forms the products itself.
     ``alpha``, ``beta`` are the slope ranges (global unless :func:`slope_structure` got a box).
+    ``E_rad`` (``None``: exact) bounds ``|E - E_exact|`` entrywise and ``cout_rad[k]`` the same
+    for the ``W`` of ``couts[k]``: a network read through an input map ``N(S x)`` enters with its
+    first layer ``W_0 S`` folded (:class:`~drip_cert.model.blocks.MappedMLP`), a float midpoint and
+    a rigorous radius, and the Arb check takes both as balls.
     """
 
     n: int
@@ -115,6 +120,8 @@ class SlopeStructure:
     alpha: np.ndarray
     beta: np.ndarray
     layers: tuple[tuple[str, int, int, int], ...] = field(default=())
+    E_rad: np.ndarray | None = None
+    cout_rad: tuple[np.ndarray | None, ...] = ()
 
     @property
     def N(self) -> int:
@@ -159,20 +166,32 @@ def _neuron_layers(mlp: MLP) -> list[int]:
 def slope_structure(
     dec: AffineBlocks, mlps: dict[str, MLP], box: np.ndarray | None = None
 ) -> SlopeStructure:
-    """:class:`SlopeStructure` of ``F = A x + c + sum_k C_k h_k(x)``; with ``box`` each neuron's
-    slope range is that over its pre-activation interval on the box (interval bound propagation,
-    :func:`~drip_cert.numerics.interval_np.affine_enclosure` and the activations' enclosures),
-    else the activation's global range."""
+    """:class:`SlopeStructure` of ``F = A x + c + sum_k C_k h_k(S_k x)``; with ``box`` each
+    neuron's slope range is that over its pre-activation interval on the box (interval bound
+    propagation, :func:`~drip_cert.numerics.interval_np.affine_enclosure_rad` and the activations'
+    enclosures), else the activation's global range. A block with an input map ``S_k``
+    (:attr:`~drip_cert.analysis.growth.closed_loop.AffineBlocks.S`, e.g. ``N(Theta^{-1} z)``)
+    enters as its folded network, first weight ``W_0 S_k`` as a midpoint and a rigorous radius
+    (:class:`~drip_cert.model.blocks.MappedMLP`), kept in ``E_rad`` / ``cout_rad``."""
     n = int(dec.A.shape[0])
     rows: list[np.ndarray] = []
+    rad_rows: list[np.ndarray] = []
     alpha: list[np.ndarray] = []
     beta: list[np.ndarray] = []
     couts = []
+    cout_rad: list[np.ndarray | None] = []
     layers = []
-    N = sum(mlps[k].weights[i].shape[0] for k in dec.C for i in _neuron_layers(mlps[k]))
+    nets: dict[str, tuple[MLP, np.ndarray | None]] = {}
+    for name in dec.C:
+        if name in dec.S:
+            mm = MappedMLP(mlps[name], dec.S[name])
+            nets[name] = (mm.folded, None if mm.exact else np.asarray(mm.rad0))
+        else:
+            nets[name] = (mlps[name], None)
+    N = sum(nets[k][0].weights[i].shape[0] for k in dec.C for i in _neuron_layers(nets[k][0]))
     r = 0
     for name, C in dec.C.items():
-        mlp = mlps[name]
+        mlp, rad0 = nets[name]
         neur = _neuron_layers(mlp)
         prev_col: int | None = None  # column of the previous layer's neurons in xi (None: v)
         lo = hi = None
@@ -182,18 +201,22 @@ def slope_structure(
             W, b, act = mlp.weights[i], mlp.biases[i], mlp.activations[i]
             m = W.shape[0]
             Ei = np.zeros((m, n + N))
+            Ri = np.zeros((m, n + N))
             if prev_col is None:
                 Ei[:, :n] = W
+                if rad0 is not None:
+                    Ri[:, :n] = rad0
             else:
                 Ei[:, prev_col : prev_col + W.shape[1]] = W
             rows.append(Ei)
+            rad_rows.append(Ri)
             if box is None:
                 bnd = act.bounds
                 alpha.append(np.full(m, bnd.slope_lo))
                 beta.append(np.full(m, bnd.slope_hi))
             else:
                 assert lo is not None and hi is not None
-                plo, phi = affine_enclosure(W, b, lo, hi)
+                plo, phi = affine_enclosure_rad(W, rad0 if i == 0 else None, b, lo, hi)
                 slo, shi = act.slope_range(plo, phi)
                 alpha.append(np.asarray(slo, float))
                 beta.append(np.asarray(shi, float))
@@ -204,11 +227,15 @@ def slope_structure(
             r += m
         if not neur:  # one affine layer: C_k W_0 acts on v
             couts.append((np.asarray(C, float), mlp.weights[0], 0))
+            cout_rad.append(rad0)
         elif neur[-1] == len(mlp.weights) - 1:  # output neurons: F picks C_k u_out
             couts.append((np.asarray(C, float), np.eye(mlp.out_dim), int(prev_col or 0)))
+            cout_rad.append(None)
         else:
             couts.append((np.asarray(C, float), mlp.weights[-1], int(prev_col or 0)))
+            cout_rad.append(None)
     E = np.vstack(rows) if rows else np.zeros((0, n))
+    E_rad = np.vstack(rad_rows) if rad_rows else np.zeros((0, n))
     return SlopeStructure(
         n,
         E,
@@ -217,6 +244,8 @@ def slope_structure(
         np.concatenate(alpha) if alpha else np.zeros(0),
         np.concatenate(beta) if beta else np.zeros(0),
         tuple(layers),
+        E_rad if np.any(E_rad) else None,
+        tuple(cout_rad),
     )
 
 
@@ -369,7 +398,8 @@ def verify_slope_lmi(st: SlopeStructure, P: np.ndarray, t: np.ndarray, lam: floa
     """Rigorously check ``P > 0``, ``t >= 0`` and ``M(P, t, lam) < 0`` (11.3).
 
     ``M`` is assembled in Arb: ``A`` and ``C_k`` as balls of their conversion radius
-    (:data:`~drip_cert.analysis.growth.closed_loop.CONVERSION_ULPS` spacings), the weights, slopes,
+    (:data:`~drip_cert.analysis.growth.closed_loop.CONVERSION_ULPS` spacings), a folded first layer
+    ``W_0 S`` as balls of its radius (``E_rad``, ``cout_rad``), the other weights, slopes,
     ``P``, ``t`` and ``lam`` as the exact floats they are; ``lambda_max`` of the ball matrix is
     bounded by :func:`~drip_cert.analysis.contraction.lognorm.lambda_max_upper` (midpoint + radius).
     """
@@ -387,8 +417,9 @@ def verify_slope_lmi(st: SlopeStructure, P: np.ndarray, t: np.ndarray, lam: floa
     for i in range(n):
         for j in range(n):
             Ga[i, j] = Aa[i, j]
-    for C, W, col in st.couts:
-        CW = _arb_ball(C, CONVERSION_ULPS * np.spacing(np.abs(C))) * _arb_ball(W)
+    for k, (C, W, col) in enumerate(st.couts):
+        w_rad = st.cout_rad[k] if k < len(st.cout_rad) else None
+        CW = _arb_ball(C, CONVERSION_ULPS * np.spacing(np.abs(C))) * _arb_ball(W, w_rad)
         for i in range(n):
             for j in range(W.shape[1]):
                 Ga[i, col + j] += CW[i, j]
@@ -398,7 +429,7 @@ def verify_slope_lmi(st: SlopeStructure, P: np.ndarray, t: np.ndarray, lam: floa
     PG = Pa * Ga
     M = Ev.transpose() * PG + PG.transpose() * Ev + Ev.transpose() * (Pa * arb(lam) * 2) * Ev
     if N:
-        Ea = _arb_ball(st.E)
+        Ea = _arb_ball(st.E, st.E_rad)
         D1 = arb_mat(N, N)
         D2 = arb_mat(N, N)
         for i in range(N):
@@ -568,7 +599,10 @@ def slope_lmi_rate(
 
 def sampled_slopes(st: SlopeStructure, mlps: dict[str, MLP], points: np.ndarray) -> np.ndarray:
     """The slopes ``s_i = s'(z_i(x))`` of every neuron at the ``points`` (``(M, n)``), as
-    ``(M, N)``: the Jacobian's actual slopes (for tests: they lie in the ranges)."""
+    ``(M, N)``: the Jacobian's actual slopes (for tests: they lie in the ranges). ``mlps`` as
+    the structure reads them: for a block with an input map ``S``, the network ``N`` itself is
+    evaluated at ``S x`` only if ``mlps`` holds ``N(S .)``, e.g. ``MappedMLP(N, S).folded``
+    (an estimate within rounding)."""
     X = np.atleast_2d(np.asarray(points, float))
     out = np.zeros((X.shape[0], st.N))
     for name, r0, r1, i in st.layers:

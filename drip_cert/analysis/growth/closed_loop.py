@@ -30,7 +30,7 @@ growth bound of the known diffusion ``||p||_F^2 <= a0 + a1 ||x|| + a2 ||x||^2``
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import sympy as sp
@@ -39,7 +39,7 @@ from drip_cert.analysis.growth.constants import batch_fn
 from drip_cert.analysis.growth.regularity import growth_bound, sup_bound
 from drip_cert.analysis.networks.mlp import enclose_output, lipschitz_bound
 from drip_cert.model.activations import Identity
-from drip_cert.model.blocks import block_applications
+from drip_cert.model.blocks import block_applications, linear_input_map
 from drip_cert.model.mlp import MLP
 from drip_cert.model.system import System
 from drip_cert.numerics.rounding import (
@@ -68,23 +68,45 @@ SUPERLINEAR_RADIUS = 1e5
 
 @dataclass(frozen=True)
 class AffineBlocks:
-    """``F(a) = A a + c + sum_k C_k h_k(a)`` (constant ``A``, ``c``, ``C_k``)."""
+    """``F(a) = A a + c + sum_k C_k h_k(S_k a)`` (constant ``A``, ``c``, ``C_k``; ``S_k`` the
+    exact input map of block ``k`` when it is in ``S``, else the identity)."""
 
     A: np.ndarray
     c: np.ndarray
     C: dict[str, np.ndarray]
+    S: dict[str, sp.ImmutableMatrix] = field(default_factory=dict)
 
 
-def affine_in_blocks(exprs: sp.MatrixBase, s: System) -> AffineBlocks | None:
+def affine_in_blocks(
+    exprs: sp.MatrixBase, s: System, *, input_maps: bool = False
+) -> AffineBlocks | None:
     """Decompose ``exprs`` (a vector in the states) as affine in the states and in block outputs
-    applied to the whole state; ``None`` when it is not of that form (or depends on ``t``)."""
+    applied to the whole state; ``None`` when it is not of that form (or depends on ``t``).
+
+    With ``input_maps=True`` a block may also be applied to ``S x`` for one constant matrix ``S``
+    per block (:func:`~drip_cert.model.blocks.linear_input_map`; e.g. ``N(Theta^{-1} z)`` in the
+    coordinates of a metric), recorded in :attr:`AffineBlocks.S`: only for callers that read
+    ``S`` (a caller that ignores it would analyse ``h_k(a)`` instead of ``h_k(S_k a)``)."""
     vec = sp.Matrix(exprs)
     x = list(s.states)
     apps = set()
     for e in vec:
         apps |= block_applications(e)
-    if any(a.deriv or a.args != tuple(x) for a in apps):
-        return None
+    maps: dict[str, sp.ImmutableMatrix] = {}
+    for a in apps:
+        if a.deriv:
+            return None
+        if a.args == tuple(x):
+            S = sp.ImmutableMatrix(sp.eye(len(x)))
+        elif not input_maps:
+            return None
+        else:
+            found = linear_input_map(a, x)
+            if found is None:
+                return None
+            S = found
+        if maps.setdefault(a.block_name, S) != S:
+            return None
     syms = {a: sp.Dummy(type(a).__name__) for a in apps}
     lin = vec.xreplace(syms).applyfunc(sp.expand)  # cancellations (e.g. after a change of
     # coordinates) must show before the coefficients are read
@@ -108,7 +130,8 @@ def affine_in_blocks(exprs: sp.MatrixBase, s: System) -> AffineBlocks | None:
         M = C.setdefault(a.block_name, np.zeros((n, s.blocks[a.block_name].out_dim)))
         for i, e in enumerate(lin):
             M[i, a.out_index] += float(sp.diff(e, z))
-    return AffineBlocks(A, c, C)
+    eye = sp.eye(len(x))
+    return AffineBlocks(A, c, C, {b: S for b, S in maps.items() if S != eye})
 
 
 def mlp_output_bound(mlp: MLP) -> float:
@@ -451,7 +474,9 @@ def closed_loop_constants(
     F = s.closed_loop(which)
     box = np.array(s.support, dtype=float)
     r0 = _box_radius_up(box)
-    dec = affine_in_blocks(F, s)
+    # a block read through an input map, h(S a) (e.g. N(Theta^{-1} z)): sup||h(S a)|| <= sup||h||,
+    # h(S 0) = h(0), Lip(h o S) <= Lip(h) ||S||_2
+    dec = affine_in_blocks(F, s, input_maps=True)
     src_f = "L1-DRAC Assumption 1 (nominal drift = closed loop under the policy)"
     src_l = "L1-DRAC Assumption 8"
     src_s = "L1-DRAC Assumption 3"
@@ -469,7 +494,11 @@ def closed_loop_constants(
             Lh = lipschitz_bound(mlp)
             lips.append(Lh)
             beta = add_up(beta, mul_up(nC, mlp_output_bound(mlp)))
-            lip = add_up(lip, mul_up(nC, Lh.value))
+            term = mul_up(nC, Lh.value)
+            if b in dec.S:  # S exact: float() correctly rounded, within CONVERSION_ULPS spacings
+                S = np.array([[float(e) for e in row] for row in dec.S[b].tolist()])
+                term = mul_up(term, _norm_of_converted(S, spectral=True))
+            lip = add_up(lip, term)
         dF = Quantity.derive(
             "Delta_f",
             sqrt_up(add_up(sq_up(nA), sq_up(beta))),
@@ -484,7 +513,8 @@ def closed_loop_constants(
             inputs=lips,
             method=How.SOUND,
             source=src_l,
-            note="||A|| + sum ||C|| Lip(h) (spectral-norm product bound of each MLP)",
+            note="||A|| + sum ||C|| Lip(h) (spectral-norm product bound of each MLP; times "
+            "||S|| for a block applied to S a)",
         )
         F0 = _f_at_zero_up(dec, s)
         global_ok = global_rate and lam.how.proved

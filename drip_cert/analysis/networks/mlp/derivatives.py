@@ -46,7 +46,7 @@ from drip_cert.errors import SpecError
 from drip_cert.model.activations import Identity, get_activation
 from drip_cert.model.mlp import MLP
 from drip_cert.numerics.interval_np import (
-    affine_enclosure,
+    affine_enclosure_rad,
     iadd,
     imul,
     intersect,
@@ -54,7 +54,7 @@ from drip_cert.numerics.interval_np import (
     mean_value_form,
     mid_rad,
 )
-from drip_cert.numerics.rounding import down_np, up_np
+from drip_cert.numerics.rounding import add_up_np, down_np, sub_down_np, up_np
 
 __all__ = [
     "DerivativeEnclosure",
@@ -176,22 +176,38 @@ def _reshape(e: DerivativeEnclosure, batch: tuple[int, ...]) -> DerivativeEnclos
 
 
 def enclose_box_and_centre(
-    mlp: MLP, lo: np.ndarray, hi: np.ndarray, *, hessian: bool = True
+    mlp: MLP,
+    lo: np.ndarray,
+    hi: np.ndarray,
+    *,
+    hessian: bool = True,
+    first_rad: np.ndarray | None = None,
 ) -> tuple[DerivativeEnclosure, DerivativeEnclosure]:
     """Centred enclosures over the boxes ``(N, in)`` and enclosures at their centres
     (:func:`~drip_cert.numerics.interval_np.mid_rad`), from one propagation (the centres ride
-    along with the boxes)."""
+    along with the boxes).
+
+    ``first_rad``: the enclosures hold for every first-layer weight within ``first_rad`` of
+    ``mlp.weights[0]`` entrywise (a network whose first layer is an interval matrix, e.g. a
+    folded input map, :class:`~drip_cert.model.blocks.MappedMLP`): the first pre-activation is
+    widened by ``first_rad |x|`` and its Jacobian is the interval weight itself."""
     lo, hi = check_box(mlp, lo, hi)
-    box, centre = _propagate(mlp, lo, hi, hessian, True)
+    box, centre = _propagate(mlp, lo, hi, hessian, True, first_rad)
     assert centre is not None
     return box, centre
 
 
 def _propagate(
-    mlp: MLP, lo: np.ndarray, hi: np.ndarray, hessian: bool, centred: bool
+    mlp: MLP,
+    lo: np.ndarray,
+    hi: np.ndarray,
+    hessian: bool,
+    centred: bool,
+    first_rad: np.ndarray | None = None,
 ) -> tuple[DerivativeEnclosure, DerivativeEnclosure | None]:
     """The propagation of :func:`enclose_derivatives` on ``(N, in)`` boxes; with ``centred`` the
-    second result encloses the derivatives at the centres."""
+    second result encloses the derivatives at the centres. ``first_rad``: the radius of an
+    interval first-layer weight (:func:`enclose_box_and_centre`)."""
     d = mlp.in_dim
     n = lo.shape[0]
     hessian = hessian and mlp.smooth  # no second derivative through a kink (relu)
@@ -202,11 +218,18 @@ def _propagate(
         zlo, zhi = lo, hi
     jz: tuple[np.ndarray, np.ndarray] | None = None  # None: the identity (exact)
     tz: tuple[np.ndarray, np.ndarray] | None = None  # None: zero (exact)
-    for w, b, act in zip(mlp.weights, mlp.biases, mlp.activations):
-        alo, ahi = affine_enclosure(w, b, zlo, zhi)
+    for k, (w, b, act) in enumerate(zip(mlp.weights, mlp.biases, mlp.activations)):
+        wr = first_rad if k == 0 else None
+        alo, ahi = affine_enclosure_rad(w, wr, b, zlo, zhi)
         if jz is None:
-            pw = np.broadcast_to(w, (zlo.shape[0], *w.shape))
-            ja = (pw, pw)
+            if wr is None:
+                pw = np.broadcast_to(w, (zlo.shape[0], *w.shape))
+                ja = (pw, pw)
+            else:  # d a / d x is the interval weight itself
+                ja = (
+                    np.broadcast_to(sub_down_np(w, wr), (zlo.shape[0], *w.shape)),
+                    np.broadcast_to(add_up_np(w, wr), (zlo.shape[0], *w.shape)),
+                )
         else:
             ja = matmul_point_left(w, *jz)
         ta = None
