@@ -45,7 +45,7 @@ from drip_cert.bounds.l1drac.conditions import (
     float_16b,
     float_21a,
     float_21b,
-    holds_24_at,
+    holds_24_oracle,
 )
 from drip_cert.bounds.l1drac.constants import L1Constants
 from drip_cert.bounds.l1drac.sides import budget_24, upsilon_sum
@@ -200,7 +200,7 @@ def min_rho_a(
     if "24" in which and Ts is not None and lambda_s is not None:
         # the sampling constants do not depend on rho_a: computed once for the whole search
         s = sampling_constants(c, p, omega, Ts, lambda_s)
-        r = _smallest(lambda y: holds_24_at(c, tc, s, omega, rho_r, y), out)
+        r = _smallest(holds_24_oracle(c, tc, s, omega, rho_r), out)
         if r is None:
             return None
         out = max(out, r)
