@@ -357,3 +357,20 @@ def test_sound_clopper_pearson_of_closed_forms_and_certify_import_no_scipy_stats
     assert out.returncode == 0, out.stderr
     want = [float(clopper_pearson_upper(0, 7, alpha=0.05, sound=True)), 1.0, 1.0]
     assert out.stdout.strip() == f"{want!r} False False"
+
+
+def test_sound_clopper_pearson_candidate_is_scipys_beta_quantile_bit_for_bit(monkeypatch):
+    """The sound bound starts its upward search at scipy's beta quantile; it is taken from the
+    ufunc behind ``scipy.stats.beta.ppf`` (without importing scipy.stats): the same floats, so
+    the same proved bounds as with scipy.stats itself (forced here by hiding the ufunc)."""
+    import drip_cert.numerics.stats as st
+
+    k = np.array([0, 1, 2, 3, 5, 8, 13, 40, 99, 100, 120])
+    for n, alpha in ((100, 0.05), (100, 0.1), (59, 0.025), (1000, 1e-3)):
+        q, a, b = 1.0 - alpha, k + 1.0, np.maximum(n - k, 1e-300)
+        assert np.array_equal(st._beta_ppf()(q, a, b), scipy.stats.beta.ppf(q, a, b))
+        fast = clopper_pearson_upper(k, n, alpha=alpha, sound=True)
+        with monkeypatch.context() as m:
+            m.setattr(st, "_beta_ppf", lambda: None)
+            slow = clopper_pearson_upper(k, n, alpha=alpha, sound=True)
+        assert np.array_equal(fast, slow)
