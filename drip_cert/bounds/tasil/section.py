@@ -98,8 +98,9 @@ def _difference_fns(s: System) -> tuple[Any, Any, Any]:
     speed_fn = jax.jit(jax.vmap(lambda z: jnp.linalg.norm(field(0.0, z, num.expert(z)))))
     while len(_FNS) >= _FNS_KEPT:
         del _FNS[next(iter(_FNS))]
-    _FNS[id(s)] = (s, (delta, jac, speed_fn))
-    return delta, jac, speed_fn
+    fns = (delta, jac, speed_fn)
+    _FNS[id(s)] = (s, fns)
+    return fns
 
 
 def _along(s: System, demos: Demonstrations, speed_sound: bool):
