@@ -70,3 +70,37 @@ def test_search_of_rho_a_is_the_same_number(seed, monkeypatch):
         ]
     assert found == generic  # bit for bit (None where no rho_a exists)
     assert any(r is not None for r in found)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_oracles_are_the_results_holds(seed):
+    """The searches ask ``holds_of(eq, *sides)`` and the compare form of the (24) oracle: the
+    ``holds`` of the full condition results, without building them."""
+    from drip_cert.bounds.l1drac.appendix import reference_constants
+    from drip_cert.bounds.l1drac.conditions import (
+        float_16a,
+        float_16b,
+        float_21a,
+        float_21b,
+        holds_24_oracle,
+        holds_of,
+    )
+    from drip_cert.bounds.l1drac.sides import sides_16a, sides_16b, sides_21a, sides_21b
+
+    c = _constants(seed)
+    p = 1
+    rc, tc = reference_constants(c, p), true_constants(c, p)
+    lam = float(c.lam)
+    rng = np.random.default_rng(200 + seed)
+    for kw, kl, kt in POINTS:
+        w, ls, Ts = kw * lam, kl * lam, kt / lam
+        s = sampling_constants(c, p, w, Ts, ls)
+        oracle = holds_24_oracle(c, tc, s, w, 1.5)
+        for x in 10.0 ** rng.uniform(-6, 6, N_Y):
+            x = float(x)
+            assert holds_of("16a", *sides_16a(c, rc, w, x)) == float_16a(c, rc, w, x).holds
+            assert holds_of("21a", *sides_21a(c, rc, w, x)) == float_21a(c, rc, w, x).holds
+            assert holds_of("16b", *sides_16b(c, tc, w, x)) == float_16b(c, tc, w, x).holds
+            want_21b = float_21b(c, tc, w, 1.5, x).holds
+            assert holds_of("21b", *sides_21b(c, tc, w, 1.5, x)) == want_21b
+            assert oracle(x) == holds_24_at(c, tc, s, w, 1.5, x)

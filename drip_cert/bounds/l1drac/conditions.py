@@ -148,6 +148,11 @@ def _holds(eq: str, lhs: float, rhs: float, margin: float) -> bool:
     return bool(holds)
 
 
+def holds_of(eq: str, lhs: float, rhs: float) -> bool:
+    """``_result(eq, lhs, rhs).holds`` without building the result (a search's oracle)."""
+    return _holds(eq, lhs, rhs, margin_of(eq, lhs, rhs))
+
+
 # --------------------------------------------------------------------------------------------
 # Argument checks
 # --------------------------------------------------------------------------------------------
@@ -258,7 +263,21 @@ def sides_24_oracle(
     omega: float,
     rho_r: float,
 ) -> Callable[[float], tuple[float, float]]:
-    """``y -> sides_24_at(c, tc, s, omega, rho_r, y)``, the same two floats bit for bit, faster.
+    """``y -> sides_24_at(c, tc, s, omega, rho_r, y)``, the same two floats bit for bit, faster
+    (:func:`_oracle_24`)."""
+    return _oracle_24(c, tc, s, omega, rho_r, False)
+
+
+def _oracle_24(
+    c: L1Constants,
+    tc: TrueConstants,
+    s: SamplingConstants,
+    omega: float,
+    rho_r: float,
+    compare: bool,
+) -> Any:
+    """``y -> sides_24_at(c, tc, s, omega, rho_r, y)`` (``compare``: ``y -> holds_24_at(...)``),
+    the same floats (booleans) bit for bit, faster.
 
     The search over ``rho_a`` asks (24) ~40 times per root at fixed ``(c, tc, s, omega,
     rho_r)``. This computes once every subexpression of (25a-c), (18c) and (23) that does not
@@ -270,6 +289,8 @@ def sides_24_oracle(
     :func:`sides_24_at` itself.
     """
     if not all(isinstance(o.num, FloatOps) for o in (c, tc, s)):
+        if compare:
+            return lambda y: holds_24_at(c, tc, s, omega, rho_r, y)
         return lambda y: sides_24_at(c, tc, s, omega, rho_r, y)
     sq = math.sqrt
     rho_r = float(rho_r)
@@ -314,8 +335,9 @@ def sides_24_oracle(
     t_3 = tc.odot_2 + t_sw * tc.odot_3
     oast_2, oast_3 = tc.oast_2, tc.oast_3
     one_m_ka = 1.0 - unmatched_gain_a(c)
+    isnan = math.isnan
 
-    def sides(y: float) -> tuple[float, float]:
+    def sides(y: float) -> Any:
         y = float(y)
         xi1 = y + rho_r + D
         ring = ring_a * (ring_r1 * sq(y) + ring_lmu * y / s_sw)
@@ -331,7 +353,10 @@ def sides_24_oracle(
         ga = (g0 + g1 * sq(y)) * y
         rpp = y + q_rpp
         th = (t_0 + t_1 * rpp + t_2 * y) * sq(y) + (t_3 + oast_2 * rpp + oast_3 * y) * y
-        return a1 + a2 + a3, one_m_ka * y**2 - ga - th / gap_c
+        lhs, rhs = a1 + a2 + a3, one_m_ka * y**2 - ga - th / gap_c
+        if compare:  # holds_24_at: _holds("24", lhs, rhs, rhs - lhs)
+            return lhs <= rhs and not isnan(rhs - lhs)
+        return lhs, rhs
 
     return sides
 
@@ -343,16 +368,9 @@ def holds_24_oracle(
     omega: float,
     rho_r: float,
 ) -> Callable[[float], bool]:
-    """``y -> holds_24_at(c, tc, s, omega, rho_r, y)`` on :func:`sides_24_oracle` (the same
-    booleans): the oracle of the search over ``rho_a``."""
-    sides = sides_24_oracle(c, tc, s, omega, rho_r)
-    isnan = math.isnan
-
-    def holds(y: float) -> bool:
-        lhs, rhs = sides(y)
-        return lhs <= rhs and not isnan(rhs - lhs)
-
-    return holds
+    """``y -> holds_24_at(c, tc, s, omega, rho_r, y)`` on the floats of :func:`sides_24_oracle`
+    (the same booleans): the oracle of the search over ``rho_a``."""
+    return _oracle_24(c, tc, s, omega, rho_r, True)
 
 
 def float_conditions(
