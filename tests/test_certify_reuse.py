@@ -43,3 +43,22 @@ def test_interval_product_without_stacking_is_the_stacked_one():
         slow = ib._mul_stacked(a[0], a[1], b[0], b[1])
         for x, y in zip(fast, slow, strict=True):
             assert np.array_equal(x, y, equal_nan=True)
+
+
+def test_growth_rewritings_are_computed_once_per_expression():
+    """The equivalent forms of an entry (sympy expand / cancel / powsimp / simplify, the costly
+    part of the paper example's growth constants: 11 distinct entries asked 176 times) are kept
+    per expression; they are the forms a fresh computation gives, and equal-looking but distinct
+    expressions (a Float and an Integer of the same value hash alike) are not confused."""
+    import sympy as sp
+
+    from drip_cert.analysis.growth import rewrites
+
+    r = sp.Dummy("rho", nonnegative=True)
+    e = r / 20 + sp.Rational(1, 10) + sp.sqrt(r**2) / (1 + r)
+    first = rewrites._rewrites(e)
+    assert rewrites._rewrites(e) is first
+    assert list(first) == list(rewrites._rewrites.__wrapped__(e))
+    assert rewrites._rewrites(sp.Float(2.0))[0] == sp.Float(2.0)
+    assert rewrites._rewrites(sp.Integer(2))[0] == sp.Integer(2)
+    assert rewrites._rewrites(sp.Integer(2))[0].is_Integer
