@@ -84,6 +84,7 @@ def test_oracles_are_the_results_holds(seed):
         float_21b,
         holds_24_oracle,
         holds_of,
+        holds_r_oracle,
     )
     from drip_cert.bounds.l1drac.sides import sides_16a, sides_16b, sides_21a, sides_21b
 
@@ -96,6 +97,8 @@ def test_oracles_are_the_results_holds(seed):
         w, ls, Ts = kw * lam, kl * lam, kt / lam
         s = sampling_constants(c, p, w, Ts, ls)
         oracle = holds_24_oracle(c, tc, s, w, 1.5)
+        o16a, o21a = holds_r_oracle(c, rc, w, "16a"), holds_r_oracle(c, rc, w, "21a")
+        assert o16a.__name__ == "holds_16a" and o21a.__name__ == "holds_21a"  # the float path
         for x in 10.0 ** rng.uniform(-6, 6, N_Y):
             x = float(x)
             assert holds_of("16a", *sides_16a(c, rc, w, x)) == float_16a(c, rc, w, x).holds
@@ -104,3 +107,28 @@ def test_oracles_are_the_results_holds(seed):
             want_21b = float_21b(c, tc, w, 1.5, x).holds
             assert holds_of("21b", *sides_21b(c, tc, w, 1.5, x)) == want_21b
             assert oracle(x) == holds_24_at(c, tc, s, w, 1.5, x)
+            assert o16a(x) == float_16a(c, rc, w, x).holds
+            assert o21a(x) == float_21a(c, rc, w, x).holds
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2, 3])
+def test_search_of_rho_r_is_the_same_number(seed, monkeypatch):
+    from drip_cert.bounds.l1drac.appendix import reference_constants
+    from drip_cert.bounds.l1drac.conditions import holds_of
+    from drip_cert.bounds.l1drac.sides import sides_16a, sides_21a
+
+    c = _constants(seed)
+    rc = reference_constants(c, 1)
+    lam = float(c.lam)
+    omegas = [k * lam for k in (0.01, 0.5, 1.5, 3.0, 50.0)]
+    found = [searches.min_rho_r(c, rc, w, ("16a", "21a")) for w in omegas]
+    side = {"16a": sides_16a, "21a": sides_21a}
+    with monkeypatch.context() as m:
+        m.setattr(
+            searches,
+            "holds_r_oracle",
+            lambda c, rc, w, eq: lambda x: holds_of(eq, *side[eq](c, rc, w, x)),
+        )
+        generic = [searches.min_rho_r(c, rc, w, ("16a", "21a")) for w in omegas]
+    assert found == generic  # bit for bit (None where no rho_r exists)
+    assert any(r is not None for r in found)

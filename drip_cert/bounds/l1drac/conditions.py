@@ -37,7 +37,13 @@ from drip_cert.bounds.l1drac.appendix import (
     true_constants,
 )
 from drip_cert.bounds.l1drac.backend import FloatOps
-from drip_cert.bounds.l1drac.constants import L1Constants, check_int, is_real, unmatched_gain_a
+from drip_cert.bounds.l1drac.constants import (
+    L1Constants,
+    check_int,
+    is_real,
+    unmatched_gain_a,
+    unmatched_gain_r,
+)
 from drip_cert.bounds.l1drac.sides import (
     RELATIONS,
     margin_of,
@@ -371,6 +377,65 @@ def holds_24_oracle(
     """``y -> holds_24_at(c, tc, s, omega, rho_r, y)`` on the floats of :func:`sides_24_oracle`
     (the same booleans): the oracle of the search over ``rho_a``."""
     return _oracle_24(c, tc, s, omega, rho_r, True)
+
+
+def holds_r_oracle(
+    c: L1Constants, rc: RefConstants, omega: float, eq: str
+) -> Callable[[float], bool]:
+    """``x -> holds_of(eq, *sides_<eq>(c, rc, omega, x))`` for ``eq`` in ``("16a", "21a")``:
+    the oracles of the search over ``rho_r``, with every subexpression of Gamma_r (18b) and
+    Theta_r (22) that does not involve ``rho_r`` computed once, and the rest in the float
+    operations of :func:`~drip_cert.bounds.l1drac.sides.sides_16a` /
+    :func:`~drip_cert.bounds.l1drac.sides.sides_21a` in their order (the same booleans; tested
+    in tests/test_l1drac_oracle.py). Float backend only; otherwise the generic form."""
+    side = {"16a": sides_16a, "21a": sides_21a}[eq]
+    if not all(isinstance(o.num, FloatOps) for o in (c, rc)):
+        return lambda x: holds_of(eq, *side(c, rc, omega, x))
+    sq, isnan = math.sqrt, math.isnan
+    om = float(omega)
+    lam, D = rc.lam, rc.Delta_star
+    w = om / abs(2.0 * lam - om)
+    sl = sq(lam)
+    # (18b) Gamma_r = A0 + A1 r^(1/2) + A2 r + A3 rho_r + A4 r^(3/2), r = rho_r + Delta_star
+    a0 = rc.circ_1 / (2 * lam) + w * rc.circ_4
+    a1 = rc.ocirc_1 / (2 * lam) + w * rc.ocirc_4
+    a2 = rc.odot_1 / (2 * lam) + w * rc.odot_8
+    a3 = rc.odot_2 / (2 * lam) + rc.odot_3 / (2 * sl) + rc.oast_1 * D / (2 * lam)
+    a4 = rc.otimes_1 / (2 * sl)
+    one_m_kr = 1.0 - unmatched_gain_r(c)
+    alpha2, eps_r = c.alpha**2, c.eps_r
+    if eq == "16a":
+
+        def holds_16a(x: float) -> bool:
+            x = float(x)
+            r = x + D
+            sr = sq(r)
+            lhs = one_m_kr * x**2
+            rhs = alpha2 + (a0 + a1 * sr + a2 * r + a3 * x + a4 * (r * sr)) + eps_r
+            return lhs >= rhs and not isnan(lhs - rhs)
+
+        return holds_16a
+    # (22) Theta_r, divided by |2 lambda - omega| (c's lambda, as sides_21a)
+    sw = sq(om)
+    b0 = rc.circ_2 + sw * rc.circ_3
+    b1 = rc.ocirc_2 + sw * rc.ocirc_3
+    b2 = rc.odot_4 + sw * rc.odot_6
+    b3 = rc.odot_5 + sw * rc.odot_7
+    b4 = rc.otimes_2 + sw * rc.otimes_4
+    b5 = rc.otimes_3 + sw * rc.otimes_5
+    oast_2, oast_3 = rc.oast_2, rc.oast_3
+    gap = abs(2.0 * c.lam - om)
+
+    def holds_21a(x: float) -> bool:
+        x = float(x)
+        r = x + D
+        sr = sq(r)
+        th = b0 + b1 * sr + b2 * r + b3 * x + (b4 * r + b5 * x) * sr + (oast_2 * r + oast_3 * x) * r
+        lhs = th / gap
+        rhs = one_m_kr * x**2 - alpha2 - (a0 + a1 * sr + a2 * r + a3 * x + a4 * (r * sr))
+        return lhs < rhs and not isnan(rhs - lhs)
+
+    return holds_21a
 
 
 def float_conditions(

@@ -43,13 +43,12 @@ from drip_cert.bounds.l1drac.conditions import (
     check_Ts,
     holds_24_oracle,
     holds_of,
+    holds_r_oracle,
 )
 from drip_cert.bounds.l1drac.constants import L1Constants
 from drip_cert.bounds.l1drac.sides import (
     budget_24,
-    sides_16a,
     sides_16b,
-    sides_21a,
     sides_21b,
     upsilon_sum,
 )
@@ -124,14 +123,14 @@ def min_rho_r(
     out = 0.0
     if "16a" in which:
         lo = math.sqrt((c.alpha**2 + c.eps_r) / (1.0 - c.k_r))
-        r = _smallest(lambda x: holds_of("16a", *sides_16a(c, rc, omega, x)), lo)
+        r = _smallest(holds_r_oracle(c, rc, omega, "16a"), lo)
         if r is None:
             return None
         out = max(out, r)
     if "21a" in which:
         lo = max(c.alpha / math.sqrt(1.0 - c.k_r), TINY)
         lo = max(lo, out)  # the joint set is an up-set: start at the (16a) root when known
-        r = _smallest(lambda x: holds_of("21a", *sides_21a(c, rc, omega, x)), lo)
+        r = _smallest(holds_r_oracle(c, rc, omega, "21a"), lo)
         if r is None:
             return None
         out = max(out, r)
