@@ -62,3 +62,17 @@ def test_growth_rewritings_are_computed_once_per_expression():
     assert rewrites._rewrites(sp.Float(2.0))[0] == sp.Float(2.0)
     assert rewrites._rewrites(sp.Integer(2))[0] == sp.Integer(2)
     assert rewrites._rewrites(sp.Integer(2))[0].is_Integer
+
+
+def test_the_certificate_imports_no_onnx():
+    """onnx (0.07 CPU-s to import) is needed only to read an .onnx network: importing the
+    certificate (the path of every `certify`) does not load it."""
+    import subprocess
+    import sys
+
+    code = "import sys, drip_cert.bounds.certificate; print('onnx' in sys.modules)"
+    out = subprocess.run(
+        [sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, check=False
+    )
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip() == "False"
