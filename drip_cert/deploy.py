@@ -27,6 +27,7 @@ import math
 import os
 from typing import TYPE_CHECKING, Any
 
+from drip_cert.bounds.certificate import Certificate, certify
 from drip_cert.errors import SpecError
 from drip_cert.model.fingerprint import Fingerprint, policy_fingerprint
 from drip_cert.model.system import System
@@ -52,11 +53,6 @@ def certificate_of(source: SpecSource | Certificate, progress: bool = False) -> 
     SpecError
         When the spec has no learned policy (the controller wraps the certified one).
     """
-    from drip_cert.bounds.certificate import (  # scipy.optimize: keep off the CLI start-up path
-        Certificate,
-        certify,
-    )
-
     if isinstance(source, Certificate):
         return source
     spec = _spec(source)

@@ -43,6 +43,7 @@ from typing import Any
 
 import pytest
 
+from drip_cert.bounds.certificate import certify
 from drip_cert.diff import DEFAULT_RTOL, DiffResult, diff_outputs, diff_text
 from drip_cert.errors import DripCertError
 from drip_cert.numerics.atomic_io import atomic_write_json, jsonable
@@ -85,10 +86,6 @@ def _spec_path(spec: Any) -> Path:
 
 def _certify(spec: Any) -> Any:
     """The certificate of ``spec``: a spec file path, a loaded ``Spec`` or a ``System``."""
-    from drip_cert.bounds.certificate import (  # scipy.optimize: keep off pytest's start-up
-        certify,
-    )
-
     if isinstance(spec, str | Path):
         spec = load_spec(spec)
     return certify(spec)

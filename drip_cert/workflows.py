@@ -28,12 +28,14 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from drip_cert.bounds.certificate import certify as _certify
 from drip_cert.errors import SpecError
 from drip_cert.figures_l1 import l1_front_figure
 from drip_cert.figures_training import training_figure
 from drip_cert.model.blocks import BlockFunction, block_applications
 from drip_cert.model.onnx_io import write_onnx
 from drip_cert.numerics.atomic_io import atomic_write_json, atomic_write_text, jsonable
+from drip_cert.numerics.stats import min_trials_zero_failures
 from drip_cert.numerics.user_files import output_dir, output_file
 from drip_cert.progress import Stages
 from drip_cert.report import (
@@ -46,6 +48,8 @@ from drip_cert.spec import load_spec
 from drip_cert.spec.load import Spec, SpecSource, as_spec
 from drip_cert.spec.settings import TRAIN_METHODS
 from drip_cert.spec.write import read_document, spec_with_policy, toml_document
+from drip_cert.validate import validate
+from drip_cert.validate.data import check_fits, load_recorded, validate_data
 
 if TYPE_CHECKING:
     from drip_cert.bounds.certificate import Certificate
@@ -198,18 +202,12 @@ def run_pipeline(
         )
     cert = None
     if certify or paths:
-        from drip_cert.bounds.certificate import (  # scipy.optimize: keep off the CLI start-up path
-            certify as _certify,
-        )
-
         stage("certificate")
         t0 = time.perf_counter()
         cert = _certify(spec, demonstrations=demos, progress=progress)
         timings["certify_s"] = time.perf_counter() - t0
     reports = []
     if paths:
-        from drip_cert.validate import validate  # scipy.stats: keep off the CLI start-up path
-
         sim = dataclasses.replace(spec.settings.simulation, **dict(simulation or {}))
         for n in paths:
             stage(f"simulation and validation ({n} paths)")
@@ -485,10 +483,6 @@ def method_rows(run: PipelineResult, *, certify: bool = True) -> dict[str, dict[
     the verdict and ``rho`` of its certificate. Every method is certified on the same expert
     demonstrations (``run.demonstrations``: the training set's thresholds and the held-out set
     that no method trained on), so the verdicts differ only by the policy."""
-    from drip_cert.bounds.certificate import (  # scipy.optimize: keep off the CLI start-up path
-        certify as _certify,
-    )
-
     rows: dict[str, dict[str, Any]] = {}
     first = next(iter(run.trained), None)
     for m, tp in run.trained.items():
@@ -687,9 +681,6 @@ def _what_to_change(
     if inner is not None and t is not None:
         i = inner["id"]
         if i.endswith(".level"):
-            # scipy.stats: keep off the CLI start-up path (only a failing held-out form needs it)
-            from drip_cert.numerics.stats import min_trials_zero_failures  # scipy.stats: see above
-
             need = min_trials_zero_failures(t.delta / 2, t.delta / 2)
             return (
                 f"more demonstrations: n_val >= {need} held-out trajectories with none exceeding "
@@ -851,12 +842,6 @@ def validate_recorded(
     as are data without one unless ``accept_unfingerprinted``
     (:func:`~drip_cert.validate.data.check_fingerprint`).
     """
-    from drip_cert.validate.data import (  # scipy.stats: keep off the CLI start-up path
-        check_fits,
-        load_recorded,
-        validate_data,
-    )
-
     if out is not None:
         output_dir(out)
     spec = load_spec(spec_path)

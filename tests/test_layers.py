@@ -253,10 +253,11 @@ def test_the_checker_fails_on_an_upward_import_a_sideways_import_and_a_cycle():
 #: Third-party packages slow enough to import that a function-local import may keep them off an
 #: import path (the design allows one "only to keep jax off the CLI's start-up path"; the others
 #: are as slow: seconds each adds to ``import drip_cert.cli`` were jax 0.3, optax 0.4, cvxpy 1.0,
-#: ot 0.9, matplotlib.pyplot 0.3, scipy.optimize 0.2, scipy.stats 0.5; clarabel is cvxpy's
-#: solver; numpy 0.1, sympy 0.3, scipy.special 0.2 and flint together made `drip-cert --help`
-#: cost 0.6 CPU-s, so the CLI imports them only in the commands that need them). Every drip_cert
-#: module is not on this list: import it at the top of the module unless it brings one of these.
+#: ot 0.9, matplotlib.pyplot 0.3, scipy.optimize 0.2, scipy.stats 0.5, onnx 0.07 (every
+#: `certify` paid it, for .onnx networks only); clarabel is cvxpy's solver; numpy 0.1, sympy
+#: 0.3, scipy.special 0.2 and flint together made `drip-cert --help` cost 0.6 CPU-s, so the CLI
+#: imports them only in the commands that need them). Every drip_cert module is not on this
+#: list: import it at the top of the module unless it brings one of these.
 HEAVY: tuple[str, ...] = (
     "numpy",
     "sympy",
@@ -268,6 +269,7 @@ HEAVY: tuple[str, ...] = (
     "cvxpy",
     "clarabel",
     "ot",
+    "onnx",
     "matplotlib",
     "scipy.optimize",
     "scipy.stats",

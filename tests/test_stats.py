@@ -333,3 +333,44 @@ def test_norms_sequential_and_errors():
         new_sums(3, 1, (-1.0,))
     with pytest.raises(SpecError, match="ci_level"):
         finalize("g", new_sums(3, 1), np.zeros(3), 1.5)
+
+
+def test_sound_clopper_pearson_of_closed_forms_and_certify_import_no_scipy_stats():
+    """scipy.stats (and scipy.optimize, which it imports) cost ~0.5 CPU-s to import, a tenth of a
+    small `certify`: the sound bound at ``k = 0`` (closed form) and ``k >= n`` (1) does not use
+    scipy's quantile, so neither it nor importing the certificate loads them; same numbers."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    code = (
+        "import sys\n"
+        "from drip_cert.numerics.stats import clopper_pearson_upper\n"
+        "r = clopper_pearson_upper([0, 7, 9], 7, alpha=0.05, sound=True)\n"
+        "import drip_cert.bounds.certificate\n"
+        "print(repr(r.tolist()), 'scipy.stats' in sys.modules, 'scipy.optimize' in sys.modules)\n"
+    )
+    root = Path(__file__).resolve().parents[1]
+    out = subprocess.run(
+        [sys.executable, "-c", code], cwd=root, capture_output=True, text=True, check=False
+    )
+    assert out.returncode == 0, out.stderr
+    want = [float(clopper_pearson_upper(0, 7, alpha=0.05, sound=True)), 1.0, 1.0]
+    assert out.stdout.strip() == f"{want!r} False False"
+
+
+def test_sound_clopper_pearson_candidate_is_scipys_beta_quantile_bit_for_bit(monkeypatch):
+    """The sound bound starts its upward search at scipy's beta quantile; it is taken from the
+    ufunc behind ``scipy.stats.beta.ppf`` (without importing scipy.stats): the same floats, so
+    the same proved bounds as with scipy.stats itself (forced here by hiding the ufunc)."""
+    import drip_cert.numerics.stats as st
+
+    k = np.array([0, 1, 2, 3, 5, 8, 13, 40, 99, 100, 120])
+    for n, alpha in ((100, 0.05), (100, 0.1), (59, 0.025), (1000, 1e-3)):
+        q, a, b = 1.0 - alpha, k + 1.0, np.maximum(n - k, 1e-300)
+        assert np.array_equal(st._beta_ppf()(q, a, b), scipy.stats.beta.ppf(q, a, b))
+        fast = clopper_pearson_upper(k, n, alpha=alpha, sound=True)
+        with monkeypatch.context() as m:
+            m.setattr(st, "_beta_ppf", lambda: None)
+            slow = clopper_pearson_upper(k, n, alpha=alpha, sound=True)
+        assert np.array_equal(fast, slow)

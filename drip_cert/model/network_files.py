@@ -8,7 +8,6 @@ from pathlib import Path
 
 from drip_cert.errors import SpecError
 from drip_cert.model.mlp import MLP, load_mlp
-from drip_cert.model.onnx_io import read_onnx
 from drip_cert.model.safetensors_io import read_safetensors
 from drip_cert.numerics.user_files import input_file
 
@@ -40,6 +39,8 @@ def load_network(
                 f"{str(path)!r}: an ONNX graph defines its own activations; remove 'activation'",
                 field=field,
             )
+        from drip_cert.model.onnx_io import read_onnx  # onnx: only an .onnx file needs it
+
         return read_onnx(path, expect_in, expect_out, field=field)
     if suffix == ".safetensors":
         return read_safetensors(path, activation, expect_in, expect_out, field=field)

@@ -74,7 +74,21 @@ def _libm(fn: Callable[[np.ndarray], np.ndarray], x: np.ndarray) -> Pair:
 
 
 def _mul(alo, ahi, blo, bhi) -> Pair:
-    """``a * b`` with ``0 * inf = 0`` (an operand's NaN stays NaN)."""
+    """``a * b`` with ``0 * inf = 0`` (an operand's NaN stays NaN).
+
+    Without a NaN among the four products their min and max are those of
+    :func:`_mul_stacked` (signed zeros aside, which the outward rounding maps to the same
+    numbers), computed without stacking; with one, :func:`_mul_stacked` decides."""
+    p1, p2, p3, p4 = alo * blo, alo * bhi, ahi * blo, ahi * bhi
+    lo = np.minimum(np.minimum(p1, p2), np.minimum(p3, p4))
+    hi = np.maximum(np.maximum(p1, p2), np.maximum(p3, p4))
+    if np.isnan(lo).any() or np.isnan(hi).any():
+        return _mul_stacked(alo, ahi, blo, bhi)
+    return down_np(lo), up_np(hi)
+
+
+def _mul_stacked(alo, ahi, blo, bhi) -> Pair:
+    """:func:`_mul` on the four products stacked (the NaN cases: ``0 * inf`` is 0)."""
     a = np.stack([alo, alo, ahi, ahi])
     b = np.stack([blo, bhi, blo, bhi])
     ps = a * b

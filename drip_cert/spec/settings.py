@@ -31,6 +31,7 @@ import numpy as np
 
 from drip_cert.errors import SpecError
 from drip_cert.model.literals import DecimalFloat
+from drip_cert.numerics.stats import min_trials_zero_failures
 from drip_cert.provenance import Scope
 from drip_cert.vocabulary import CONTRACTION_METHODS
 
@@ -908,9 +909,6 @@ def heldout_default(delta: float) -> int:
     held-out form (docs/math/tasil.md 3.3 c) can pass at ``delta``: with no trajectory exceeding
     ``tau``, the sound one-sided Clopper-Pearson bound at confidence ``1 - delta/2`` must reach
     ``delta/2`` (:func:`~drip_cert.numerics.stats.min_trials_zero_failures`)."""
-    # scipy.stats: keep off the CLI start-up path (only certify needs the default)
-    from drip_cert.numerics.stats import min_trials_zero_failures  # scipy.stats: see above
-
     return min_trials_zero_failures(delta / 2.0, delta / 2.0)
 
 

@@ -19,6 +19,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from drip_cert.bounds.certificate import certify
 from drip_cert.errors import SpecError
 from drip_cert.model.system import System
 from drip_cert.provenance import ValidationStatus, split_timings
@@ -226,10 +227,6 @@ def validate(
             field="policy.learned",
         )
     if cert is None:
-        from drip_cert.bounds.certificate import (  # scipy.optimize: keep off the import path
-            certify,
-        )
-
         cert = certify(spec, progress=progress)
     T = float(horizon or s.horizon)
     notes: list[str] = []

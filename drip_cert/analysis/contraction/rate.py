@@ -39,7 +39,6 @@ from typing import Any, Protocol
 
 import numpy as np
 import sympy as sp
-from scipy.optimize import minimize
 
 from drip_cert.analysis.contraction.lognorm import mu2_constant_bounds, mu2_interval_upper, mu_2
 from drip_cert.analysis.contraction.mlp_loop import DEFAULT_BATCH, box_bounds, decompose_jacobian
@@ -346,6 +345,8 @@ def sampled_max_mu2(
     best_i = int(order[0])
     best, arg = float(vals[best_i]), P[best_i].copy()
     bounds = [(float(a), float(b)) for a, b in full_box]
+    from scipy.optimize import minimize  # scipy.optimize: 0.4 CPU-s to import, this route only
+
     for i in order[: options.n_local]:
         res = minimize(
             lambda z: -float(mu_at(z)[0]),

@@ -11,6 +11,7 @@
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Sequence
 
 import numpy as np
@@ -22,6 +23,7 @@ _CHECK_SEED = 7  #: seed of the points at which a radial rewriting is re-checked
 _CHECK_POINTS = 3  #: how many points
 _CHECK_RTOL = 1e-12  #: the rewriting is an identity; 30-digit evaluation agrees far below this
 _SIMPLIFY_MAX_OPS = 150  #: ``simplify`` only expressions smaller than this (it is slow)
+_REWRITES_KEPT = 256  #: expressions whose forms are kept (the paper example asks 11, 176 times)
 
 
 def radial_profile(
@@ -71,8 +73,12 @@ def radial_profile(
     return out
 
 
-def _rewrites(e: sp.Expr) -> list[sp.Expr]:
-    """Equivalent forms of ``e`` (identities for positive symbols), the cheap ones first."""
+@functools.lru_cache(maxsize=_REWRITES_KEPT)
+def _rewrites(e: sp.Expr) -> tuple[sp.Expr, ...]:
+    """Equivalent forms of ``e`` (identities for positive symbols), the cheap ones first.
+
+    Kept per expression (a deterministic function of it): the growth routes ask for the same
+    few entries many times (every entry of a diagonal diffusion, each rewriting of a norm)."""
     forms = [e]
     for fn in (
         sp.expand,
@@ -86,7 +92,7 @@ def _rewrites(e: sp.Expr) -> list[sp.Expr]:
             continue
         if all(f != g for g in forms):
             forms.append(f)
-    return forms
+    return tuple(forms)
 
 
 def rewritings(exprs: Sequence[sp.Expr]) -> list[list[sp.Expr]]:

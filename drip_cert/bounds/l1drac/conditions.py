@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, TypedDict, Unpack
 
@@ -31,10 +32,18 @@ from drip_cert.bounds.l1drac.appendix import (
     RefConstants,
     SamplingConstants,
     TrueConstants,
+    frak_p_prime,
     reference_constants,
     true_constants,
 )
-from drip_cert.bounds.l1drac.constants import L1Constants, check_int, is_real
+from drip_cert.bounds.l1drac.backend import FloatOps
+from drip_cert.bounds.l1drac.constants import (
+    L1Constants,
+    check_int,
+    is_real,
+    unmatched_gain_a,
+    unmatched_gain_r,
+)
 from drip_cert.bounds.l1drac.sides import (
     RELATIONS,
     margin_of,
@@ -145,6 +154,11 @@ def _holds(eq: str, lhs: float, rhs: float, margin: float) -> bool:
     return bool(holds)
 
 
+def holds_of(eq: str, lhs: float, rhs: float) -> bool:
+    """``_result(eq, lhs, rhs).holds`` without building the result (a search's oracle)."""
+    return _holds(eq, lhs, rhs, margin_of(eq, lhs, rhs))
+
+
 # --------------------------------------------------------------------------------------------
 # Argument checks
 # --------------------------------------------------------------------------------------------
@@ -246,6 +260,182 @@ def holds_24_at(
     result: the oracle of the search over rho_a, asked ~10^5 times per design."""
     lhs, rhs = sides_24_at(c, tc, s, omega, rho_r, rho_a)
     return _holds("24", lhs, rhs, margin_of("24", lhs, rhs))
+
+
+def sides_24_oracle(
+    c: L1Constants,
+    tc: TrueConstants,
+    s: SamplingConstants,
+    omega: float,
+    rho_r: float,
+) -> Callable[[float], tuple[float, float]]:
+    """``y -> sides_24_at(c, tc, s, omega, rho_r, y)``, the same two floats bit for bit, faster
+    (:func:`_oracle_24`)."""
+    return _oracle_24(c, tc, s, omega, rho_r, False)
+
+
+def _oracle_24(
+    c: L1Constants,
+    tc: TrueConstants,
+    s: SamplingConstants,
+    omega: float,
+    rho_r: float,
+    compare: bool,
+) -> Any:
+    """``y -> sides_24_at(c, tc, s, omega, rho_r, y)`` (``compare``: ``y -> holds_24_at(...)``),
+    the same floats (booleans) bit for bit, faster.
+
+    The search over ``rho_a`` asks (24) ~40 times per root at fixed ``(c, tc, s, omega,
+    rho_r)``. This computes once every subexpression of (25a-c), (18c) and (23) that does not
+    involve ``rho_a`` and evaluates the rest with the float operations of
+    :func:`~drip_cert.bounds.l1drac.sides.sides_24_at`, in the same order: every hoisted factor
+    is a left-most operand of its product or sum there (Python evaluates ``a * b * y`` as
+    ``(a * b) * y``), so each float is the same (tested against :func:`sides_24_at` in
+    tests/test_l1drac_oracle.py). Float backend only (the searches'); another backend gets
+    :func:`sides_24_at` itself.
+    """
+    if not all(isinstance(o.num, FloatOps) for o in (c, tc, s)):
+        if compare:
+            return lambda y: holds_24_at(c, tc, s, omega, rho_r, y)
+        return lambda y: sides_24_at(c, tc, s, omega, rho_r, y)
+    sq = math.sqrt
+    rho_r = float(rho_r)
+    D = c.Delta_star
+    sc = s.consts
+    fp1 = frak_p_prime(s.p)
+    # (A.19c) ring-Upsilon(xi2) = Delta_g^2 (fp1 (L_p_par + L_sigma_par) xi2^(1/2)
+    #                                        + L_mu_par xi2 / omega^(1/2))
+    ring_a = sc.Delta_g**2
+    ring_r1 = fp1 * (sc.L_p_par + sc.L_sigma_par)
+    ring_lmu = sc.L_mu_par
+    s_sw = sq(s.omega)
+    # (A.18a-c), (A.19a, b) in xi1 and the factors of (25a-c)
+    d_p_par, d_s_par, d_mu_par = sc.Delta_p_par, sc.Delta_sigma_par, sc.Delta_mu_par
+    k_tilde = s_sw * fp1 * sq(s.one_m_e2omega)
+    k_tilde_out = s.one_m_e2lam * sc.Delta_g
+    lam_s = sc.lam
+    gap_s = abs(2.0 * lam_s - s.omega)
+    k_a1 = s.omega / (lam_s * gap_s)
+    g1p = s.gamma_1p
+    two_fp1 = 2.0 * fp1
+    swfp1 = s_sw * fp1
+    u1_0 = s.mu_1 + swfp1 * s.sigma_1
+    u1_1 = swfp1 * s.sigma_2
+    u1_2 = s.mu_2 + swfp1 * s.sigma_3
+    mu_3, gamma_pp, dg = s.mu_3, s.gamma_pp, sc.Delta_g
+    sw_gap = s_sw / gap_s
+    two_dg = 2.0 * sc.Delta_g
+    sw_lam = s_sw / lam_s
+    u3_k = sc.Delta_mu_par * s.expm1_omega_Ts
+    # the right side (budget_24): Gamma_a (18c) and Theta_a (23) / |2 lambda - omega|
+    om = float(omega)
+    lam_t = tc.lam
+    gap_c = abs(2.0 * c.lam - om)
+    g0 = tc.odot_1 / (2 * lam_t) + om * tc.odot_4 / abs(2.0 * lam_t - om)
+    g1 = tc.otimes_1 / (2 * sq(lam_t))
+    t_sw = sq(om)
+    q_rpp = 2.0 * (rho_r + D)
+    t_0 = t_sw * tc.ocirc_1
+    t_1 = t_sw * tc.otimes_3
+    t_2 = tc.otimes_2 + t_sw * tc.otimes_4
+    t_3 = tc.odot_2 + t_sw * tc.odot_3
+    oast_2, oast_3 = tc.oast_2, tc.oast_3
+    one_m_ka = 1.0 - unmatched_gain_a(c)
+    isnan = math.isnan
+
+    def sides(y: float) -> Any:
+        y = float(y)
+        xi1 = y + rho_r + D
+        ring = ring_a * (ring_r1 * sq(y) + ring_lmu * y / s_sw)
+        sx = sq(xi1)
+        par = d_p_par + d_s_par * (1.0 + sx)
+        one_xi = 1.0 + xi1
+        umt = k_tilde_out * (k_tilde * par + d_mu_par * one_xi) / lam_s
+        um = g1p * (two_fp1 * par + d_mu_par * one_xi / s_sw)
+        a1 = umt * y + k_a1 * ring * um
+        u1p = u1_0 + u1_1 * sq(sx) + u1_2 * sx + mu_3 * xi1
+        a2 = (dg * y + sw_gap * ring) * (u1p + s_sw * (gamma_pp * par)) / lam_s
+        a3 = (two_dg * y + sw_lam * ring) * (u3_k * one_xi) / gap_s
+        ga = (g0 + g1 * sq(y)) * y
+        rpp = y + q_rpp
+        th = (t_0 + t_1 * rpp + t_2 * y) * sq(y) + (t_3 + oast_2 * rpp + oast_3 * y) * y
+        lhs, rhs = a1 + a2 + a3, one_m_ka * y**2 - ga - th / gap_c
+        if compare:  # holds_24_at: _holds("24", lhs, rhs, rhs - lhs)
+            return lhs <= rhs and not isnan(rhs - lhs)
+        return lhs, rhs
+
+    return sides
+
+
+def holds_24_oracle(
+    c: L1Constants,
+    tc: TrueConstants,
+    s: SamplingConstants,
+    omega: float,
+    rho_r: float,
+) -> Callable[[float], bool]:
+    """``y -> holds_24_at(c, tc, s, omega, rho_r, y)`` on the floats of :func:`sides_24_oracle`
+    (the same booleans): the oracle of the search over ``rho_a``."""
+    return _oracle_24(c, tc, s, omega, rho_r, True)
+
+
+def holds_r_oracle(
+    c: L1Constants, rc: RefConstants, omega: float, eq: str
+) -> Callable[[float], bool]:
+    """``x -> holds_of(eq, *sides_<eq>(c, rc, omega, x))`` for ``eq`` in ``("16a", "21a")``:
+    the oracles of the search over ``rho_r``, with every subexpression of Gamma_r (18b) and
+    Theta_r (22) that does not involve ``rho_r`` computed once, and the rest in the float
+    operations of :func:`~drip_cert.bounds.l1drac.sides.sides_16a` /
+    :func:`~drip_cert.bounds.l1drac.sides.sides_21a` in their order (the same booleans; tested
+    in tests/test_l1drac_oracle.py). Float backend only; otherwise the generic form."""
+    side = {"16a": sides_16a, "21a": sides_21a}[eq]
+    if not all(isinstance(o.num, FloatOps) for o in (c, rc)):
+        return lambda x: holds_of(eq, *side(c, rc, omega, x))
+    sq, isnan = math.sqrt, math.isnan
+    om = float(omega)
+    lam, D = rc.lam, rc.Delta_star
+    w = om / abs(2.0 * lam - om)
+    sl = sq(lam)
+    # (18b) Gamma_r = A0 + A1 r^(1/2) + A2 r + A3 rho_r + A4 r^(3/2), r = rho_r + Delta_star
+    a0 = rc.circ_1 / (2 * lam) + w * rc.circ_4
+    a1 = rc.ocirc_1 / (2 * lam) + w * rc.ocirc_4
+    a2 = rc.odot_1 / (2 * lam) + w * rc.odot_8
+    a3 = rc.odot_2 / (2 * lam) + rc.odot_3 / (2 * sl) + rc.oast_1 * D / (2 * lam)
+    a4 = rc.otimes_1 / (2 * sl)
+    one_m_kr = 1.0 - unmatched_gain_r(c)
+    alpha2, eps_r = c.alpha**2, c.eps_r
+    if eq == "16a":
+
+        def holds_16a(x: float) -> bool:
+            x = float(x)
+            r = x + D
+            sr = sq(r)
+            lhs = one_m_kr * x**2
+            rhs = alpha2 + (a0 + a1 * sr + a2 * r + a3 * x + a4 * (r * sr)) + eps_r
+            return lhs >= rhs and not isnan(lhs - rhs)
+
+        return holds_16a
+    # (22) Theta_r, divided by |2 lambda - omega| (c's lambda, as sides_21a)
+    sw = sq(om)
+    b0 = rc.circ_2 + sw * rc.circ_3
+    b1 = rc.ocirc_2 + sw * rc.ocirc_3
+    b2 = rc.odot_4 + sw * rc.odot_6
+    b3 = rc.odot_5 + sw * rc.odot_7
+    b4 = rc.otimes_2 + sw * rc.otimes_4
+    b5 = rc.otimes_3 + sw * rc.otimes_5
+    oast_2, oast_3 = rc.oast_2, rc.oast_3
+    gap = abs(2.0 * c.lam - om)
+
+    def holds_21a(x: float) -> bool:
+        x = float(x)
+        r = x + D
+        sr = sq(r)
+        th = b0 + b1 * sr + b2 * r + b3 * x + (b4 * r + b5 * x) * sr + (oast_2 * r + oast_3 * x) * r
+        lhs = th / gap
+        rhs = one_m_kr * x**2 - alpha2 - (a0 + a1 * sr + a2 * r + a3 * x + a4 * (r * sr))
+        return lhs < rhs and not isnan(rhs - lhs)
+
+    return holds_21a
 
 
 def float_conditions(

@@ -41,14 +41,17 @@ from drip_cert.bounds.l1drac.conditions import (
     check_omega,
     check_p,
     check_Ts,
-    float_16a,
-    float_16b,
-    float_21a,
-    float_21b,
-    holds_24_at,
+    holds_24_oracle,
+    holds_of,
+    holds_r_oracle,
 )
 from drip_cert.bounds.l1drac.constants import L1Constants
-from drip_cert.bounds.l1drac.sides import budget_24, upsilon_sum
+from drip_cert.bounds.l1drac.sides import (
+    budget_24,
+    sides_16b,
+    sides_21b,
+    upsilon_sum,
+)
 from drip_cert.errors import SpecError
 
 __all__ = ["ROOT_RTOL", "smallest_rho_r", "smallest_rho_a", "largest_Ts"]
@@ -120,14 +123,14 @@ def min_rho_r(
     out = 0.0
     if "16a" in which:
         lo = math.sqrt((c.alpha**2 + c.eps_r) / (1.0 - c.k_r))
-        r = _smallest(lambda x: float_16a(c, rc, omega, x).holds, lo)
+        r = _smallest(holds_r_oracle(c, rc, omega, "16a"), lo)
         if r is None:
             return None
         out = max(out, r)
     if "21a" in which:
         lo = max(c.alpha / math.sqrt(1.0 - c.k_r), TINY)
         lo = max(lo, out)  # the joint set is an up-set: start at the (16a) root when known
-        r = _smallest(lambda x: float_21a(c, rc, omega, x).holds, lo)
+        r = _smallest(holds_r_oracle(c, rc, omega, "21a"), lo)
         if r is None:
             return None
         out = max(out, r)
@@ -188,19 +191,19 @@ def min_rho_a(
     out = TINY if start is None else start
     if "16b" in which:
         lo = math.sqrt(c.eps_a / (1.0 - c.k_a))
-        r = _smallest(lambda y: float_16b(c, tc, omega, y).holds, lo)
+        r = _smallest(lambda y: holds_of("16b", *sides_16b(c, tc, omega, y)), lo)
         if r is None:
             return None
         out = max(out, r)
     if "21b" in which:
-        r = _smallest(lambda y: float_21b(c, tc, omega, rho_r, y).holds, out)
+        r = _smallest(lambda y: holds_of("21b", *sides_21b(c, tc, omega, rho_r, y)), out)
         if r is None:
             return None
         out = max(out, r)
     if "24" in which and Ts is not None and lambda_s is not None:
         # the sampling constants do not depend on rho_a: computed once for the whole search
         s = sampling_constants(c, p, omega, Ts, lambda_s)
-        r = _smallest(lambda y: holds_24_at(c, tc, s, omega, rho_r, y), out)
+        r = _smallest(holds_24_oracle(c, tc, s, omega, rho_r), out)
         if r is None:
             return None
         out = max(out, r)
