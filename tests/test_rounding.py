@@ -21,6 +21,7 @@ from scipy.special import ndtr
 
 from drip_cert.numerics.rounding import (
     LIBM_REL,
+    NEXTAFTER_INT_MIN,
     add_down,
     add_up,
     arb_hi,
@@ -30,6 +31,7 @@ from drip_cert.numerics.rounding import (
     div_down,
     div_up,
     down,
+    down_np,
     enclose_down,
     enclose_up,
     gamma,
@@ -51,6 +53,7 @@ from drip_cert.numerics.rounding import (
     sum_up_np,
     sym_lambda_max_upper,
     up,
+    up_np,
     widen_np,
 )
 from tests.helpers import MP_DPS
@@ -103,6 +106,38 @@ def test_up_down_move_outward_and_propagate_nan(a):
     assert up(a, 3) > up(a) or up(a) == math.inf
     assert math.isnan(up(math.nan)) and math.isnan(down(math.nan))
     assert enclose_down(math.nan) == -math.inf and enclose_up(math.nan) == math.inf
+
+
+def _same_bits(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Entrywise: the same float64 bits, or both NaN (NaN payloads and signs are not a value)."""
+    return (a.view(np.int64) == b.view(np.int64)) | (np.isnan(a) & np.isnan(b))
+
+
+@pytest.mark.parametrize("ulps", [1, 3])
+def test_up_np_down_np_equal_nextafter_bit_for_bit(ulps):
+    """The integer form of up_np / down_np (arrays of NEXTAFTER_INT_MIN entries or more) gives
+    np.nextafter's floats exactly: on every special value (signed zeros, subnormal ends, the
+    largest float, infinities, NaN) and on a million random bit patterns (all exponents, both
+    signs, NaN payloads among them)."""
+    rng = np.random.default_rng(2026)
+    tiny, big = np.finfo(np.float64).tiny, np.finfo(np.float64).max
+    special = np.array(
+        [0.0, -0.0, np.inf, -np.inf, np.nan, -np.nan, 2.0**-1074, -(2.0**-1074), tiny, -tiny]
+        + [np.nextafter(tiny, 0.0), -np.nextafter(tiny, 0.0), big, -big, 1.0, -1.0, 0.5, -0.5]
+    )
+    special = np.resize(special, NEXTAFTER_INT_MIN)  # at the threshold: the integer form
+    ints = rng.integers(np.iinfo(np.int64).min, np.iinfo(np.int64).max, 10**6, dtype=np.int64)
+    for x in (special, ints.view(np.float64), special[:7], rng.normal(size=(40, 50))):
+        with np.errstate(all="ignore"):
+            want_up, want_down = x.copy(), x.copy()
+            for _ in range(ulps):
+                want_up = np.nextafter(want_up, np.inf)
+                want_down = np.nextafter(want_down, -np.inf)
+            got_up, got_down = up_np(x, ulps), down_np(x, ulps)  # (signalling NaNs warn)
+        assert got_up.shape == x.shape and got_down.shape == x.shape
+        assert _same_bits(got_up, want_up).all()
+        assert _same_bits(got_down, want_down).all()
+        assert not np.shares_memory(got_up, x) and not np.shares_memory(got_down, x)
 
 
 def test_overflow_and_underflow_ends():

