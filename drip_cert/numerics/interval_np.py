@@ -141,10 +141,23 @@ def mean_value_form(clo, chi, dlo, dhi, r):
 
 def imul(alo, ahi, blo, bhi):
     """Enclosure of ``a * b`` for intervals (elementwise, broadcasting): the four end products,
-    each one rounding, moved outward."""
-    p1, p2, p3, p4 = alo * blo, alo * bhi, ahi * blo, ahi * bhi
-    lo = np.minimum(np.minimum(p1, p2), np.minimum(p3, p4))
-    hi = np.maximum(np.maximum(p1, p2), np.maximum(p3, p4))
+    each one rounding, moved outward.
+
+    When one factor is non-negative everywhere (a slope ``s' >= 0``, a square), two products per
+    end suffice: for ``a >= 0`` the product is non-decreasing in ``b``, so its minimum over the
+    box is ``min(alo blo, ahi blo)`` and its maximum ``max(alo bhi, ahi bhi)``; rounding to
+    nearest is monotone, so these are also the float minimum and maximum of the four rounded
+    products (the same floats; where a product of the four is NaN, e.g. ``0 * inf``, the
+    generic form returns NaN and this one the bound of the other two, both sound).
+    """
+    if np.all(alo >= 0.0):
+        lo, hi = np.minimum(alo * blo, ahi * blo), np.maximum(alo * bhi, ahi * bhi)
+    elif np.all(blo >= 0.0):
+        lo, hi = np.minimum(alo * blo, alo * bhi), np.maximum(ahi * blo, ahi * bhi)
+    else:
+        p1, p2, p3, p4 = alo * blo, alo * bhi, ahi * blo, ahi * bhi
+        lo = np.minimum(np.minimum(p1, p2), np.minimum(p3, p4))
+        hi = np.maximum(np.maximum(p1, p2), np.maximum(p3, p4))
     return down_np(lo), up_np(hi)
 
 
