@@ -360,7 +360,8 @@ def run_chunks(
                 bar.update(n_real * cfg.n_steps)
             while absorbed < len(todo) and len(done[todo[absorbed]]) == parts:
                 c0 = todo[absorbed]
-                outs = [done.pop(c0)[q] for q in range(parts)]
+                by_part = done.pop(c0)
+                outs = [by_part[q] for q in range(parts)]
                 recs = np.concatenate([o[0] for o in outs], axis=2)[:, :, :cs]
                 codes = np.concatenate([o[1] for o in outs], axis=1)[:, :cs]
                 idx64 = np.arange(c0 * cs, (c0 + 1) * cs, dtype=np.int64)
