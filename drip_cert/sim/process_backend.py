@@ -66,7 +66,15 @@ from drip_cert.sim.accumulate import RunState, absorb
 from drip_cert.sim.config import SimConfig
 from drip_cert.sim.resume import save_state
 
-__all__ = ["TASKS_PER_WORKER", "Startup", "can_pin", "run_chunks", "worker_cores"]
+__all__ = [
+    "TASKS_PER_WORKER",
+    "Startup",
+    "can_pin",
+    "last_startup",
+    "last_task_cpu_s",
+    "run_chunks",
+    "worker_cores",
+]
 
 TASKS_PER_WORKER = 2
 """Sub-batches handed to a worker and not yet returned: one running, one queued behind it."""
@@ -99,6 +107,10 @@ class Startup:
 
 last_startup: Startup | None = None
 """The start-up of the last ``processes`` run in this process (read by the benchmarks)."""
+
+last_task_cpu_s: float = 0.0
+"""CPU seconds the workers of the last ``processes`` run spent in their sub-batches (all
+workers; start-up excluded; read by the benchmarks)."""
 
 
 def can_pin() -> bool:
@@ -148,7 +160,9 @@ def _worker(fd: int, core: int | None, t_spawn: float) -> None:
                 return
             seq, idx = msg
             try:
-                conn.send(("ok", seq, *run_indices(job, idx)))
+                c0 = time.process_time()
+                recs, codes = run_indices(job, idx)
+                conn.send(("ok", seq, recs, codes, time.process_time() - c0))
             except Exception as exc:  # noqa: BLE001 - sent to the caller, raised there
                 conn.send(("error", seq, f"{type(exc).__name__}: {exc}", traceback.format_exc()))
     except (EOFError, OSError):  # the caller is gone
@@ -301,7 +315,7 @@ def run_chunks(
     tuple of RunState, float, float
         The final state, the start-up seconds (:class:`Startup`) and the run seconds.
     """
-    global last_startup
+    global last_startup, last_task_cpu_s
     cs = cfg.chunk_size
     tasks: list[tuple[int, int, np.ndarray, int]] = []  # (chunk, part, indices, real paths)
     for c in todo:
@@ -328,6 +342,7 @@ def run_chunks(
         last_startup = Startup(startup_s, tuple(imp), tuple(comp), tuple(cores))
 
         t1 = time.perf_counter()
+        last_task_cpu_s = 0.0
         outstanding: list[set[int]] = [set() for _ in range(n_workers)]  # tasks per worker
         done: dict[int, dict[int, tuple[np.ndarray, np.ndarray]]] = {c: {} for c in todo}
         nxt = 0  # next task to hand out
@@ -357,6 +372,7 @@ def run_chunks(
                     raise err
                 outstanding[k].discard(seq)
                 done[c][q] = (msg[2], msg[3])
+                last_task_cpu_s += msg[4]
                 bar.update(n_real * cfg.n_steps)
             while absorbed < len(todo) and len(done[todo[absorbed]]) == parts:
                 c0 = todo[absorbed]
