@@ -64,6 +64,7 @@ import numpy as np
 from drip_cert.errors import DripCertError, SpecError
 from drip_cert.sim.accumulate import RunState, absorb
 from drip_cert.sim.config import SimConfig
+from drip_cert.sim.dask_backend import _ChunkJob, run_indices
 from drip_cert.sim.resume import save_state
 
 __all__ = [
@@ -139,14 +140,13 @@ _ENTRY = (
 
 
 def _worker(fd: int, core: int | None, t_spawn: float) -> None:
-    """A worker process: import jax, compile the kernel it is sent, simulate sub-batches until
-    told to stop (``None``) or its socket closes. Pinned by :data:`_ENTRY` before any import."""
+    """A worker process: compile the kernel it is sent, simulate sub-batches until told to stop
+    (``None``) or its socket closes. Pinned by :data:`_ENTRY` before it imported this module
+    (and with it jax)."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the caller ends the workers on Ctrl-C
     conn = Connection(fd)
     try:
-        from drip_cert.sim.dask_backend import _ChunkJob, run_indices  # imports jax
-
-        t_import = time.time() - t_spawn
+        t_import = time.time() - t_spawn  # spawn + imports (this module imports jax)
         exported = conn.recv()
         t0 = time.perf_counter()
         job = _ChunkJob(exported)
