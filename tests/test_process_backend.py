@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from drip_cert.cli import build_parser
-from drip_cert.errors import DripCertError
+from drip_cert.errors import DripCertError, SpecError
 from drip_cert.sim import engine, kernel, process_backend
 from drip_cert.sim.backend import BACKENDS, Backend
 from drip_cert.sim.engine import simulate
@@ -100,6 +100,13 @@ def test_keyboard_interrupt_ends_the_workers(model, monkeypatch, pools):
     with pytest.raises(KeyboardInterrupt):
         simulate(model, _CFG, _x0, _x0_bar, progress=False, backend=PROCS)
     _all_gone(pools)
+
+
+def test_without_flatbuffers_the_error_says_what_to_install(model, monkeypatch, pools):
+    monkeypatch.setattr(process_backend, "_can_serialize", lambda: False)
+    with pytest.raises(SpecError, match="pip install flatbuffers"):
+        simulate(model, _CFG, _x0, _x0_bar, progress=False, backend=PROCS)
+    assert not pools  # refused before any worker starts
 
 
 def test_backend_and_cli_accept_processes():

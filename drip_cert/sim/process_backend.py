@@ -23,6 +23,8 @@ pinned round robin. Each worker receives the run's kernel as exported StableHLO
 :class:`~drip_cert.sim.dask_backend._ChunkJob`), compiles it once, and then simulates sub-batches
 of paths given by their global indices (:func:`~drip_cert.sim.dask_backend.run_indices`) - the
 same sub-batches as the local backend, so that each call's activations stay in the core's cache.
+Serializing the kernel needs the optional package ``flatbuffers`` (as for Dask); without it the
+run stops before any worker starts, with a message saying what to install.
 The caller absorbs the chunks IN ORDER (:func:`~drip_cert.sim.accumulate.absorb`), so the
 statistics and resume files are the local backend's, bit for bit (``tests/test_engine.py``).
 
@@ -46,6 +48,7 @@ dies without cleaning up reads end-of-file on its pipe and exits.
 
 from __future__ import annotations
 
+import importlib.util
 import os
 import signal
 import socket
@@ -243,6 +246,11 @@ class _Pool:
             c.close()
 
 
+def _can_serialize() -> bool:
+    """Whether ``jax.export`` can serialize here (it needs the optional package flatbuffers)."""
+    return importlib.util.find_spec("flatbuffers") is not None
+
+
 def _died(pool: _Pool, k: int) -> DripCertError:
     """The error of a worker that died (its pipe closed)."""
     p = pool.procs[k]
@@ -325,6 +333,13 @@ def run_chunks(
         for q in range(parts):
             real = min(max(n_real - q * sub, 0), sub)
             tasks.append((c, q, padded[q * sub : (q + 1) * sub], real))
+    if not _can_serialize():
+        raise SpecError(
+            "backend 'processes' sends the kernel to its workers as serialized jax.export "
+            "programs, which needs the package flatbuffers: pip install flatbuffers (or "
+            "drip-cert[dask]), or use --backend local",
+            field="backend",
+        )
     pool = _Pool(n_workers)
     graceful = False
     try:
