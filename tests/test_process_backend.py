@@ -54,10 +54,13 @@ def _all_gone(pools) -> None:
                 os.kill(p.pid, 0)
 
 
-def test_processes_equal_local_bit_for_bit(model, local_result, pools):
+def test_processes_equal_local_bit_for_bit(model, local_result, pools, capsys):
     """Records (sample paths), gap means and every other statistic: the same bits, 3 chunks
-    on 2 pinned workers; each worker reports its own core."""
-    res = simulate(model, _CFG, _x0, _x0_bar, progress=False, backend=PROCS)
+    on 2 pinned workers; each worker reports its own core; the bar counts every path-step."""
+    res = simulate(model, _CFG, _x0, _x0_bar, progress=True, backend=PROCS)
+    err = capsys.readouterr().err
+    total = _CFG.n_paths * _CFG.n_steps  # 9000: tqdm writes 9.00k
+    assert f"{total / 1000:.2f}k/{total / 1000:.2f}k" in err and "100%" in err, err[-300:]
     assert res.complete and res.n_paths_done == _CFG.n_paths and _CFG.n_chunks == 3
     assert np.array_equal(res.sample_paths, local_result.sample_paths, equal_nan=True)
     for g, g0 in zip(res.gaps, local_result.gaps, strict=True):

@@ -153,7 +153,11 @@ def _worker(fd: int, core: int | None, t_spawn: float) -> None:
         exported = conn.recv()
         t0 = time.perf_counter()
         job = _ChunkJob(exported)
-        job.kernel()
+        try:
+            job.kernel()
+        except Exception as exc:  # noqa: BLE001 - sent to the caller, raised there
+            conn.send(("error", -1, f"{type(exc).__name__}: {exc}", traceback.format_exc()))
+            return
         t_compile = time.perf_counter() - t0
         aff = tuple(sorted(os.sched_getaffinity(0))) if core is not None else None
         conn.send(("ready", t_import, t_compile, aff))
@@ -325,14 +329,17 @@ def run_chunks(
     """
     global last_startup, last_task_cpu_s
     cs = cfg.chunk_size
-    tasks: list[tuple[int, int, np.ndarray, int]] = []  # (chunk, part, indices, real paths)
-    for c in todo:
+    n_tasks = len(todo) * parts
+
+    def task(seq: int) -> tuple[int, int, np.ndarray, int]:
+        """Task ``seq``: ``(chunk, part, path indices (sub,), real paths)`` (made when sent:
+        a run of 10^9 paths has 10^5-10^6 of them)."""
+        c, q = todo[seq // parts], seq % parts
         idx = np.arange(c * cs, (c + 1) * cs, dtype=np.uint32)
         padded = np.concatenate([idx, np.full(parts * sub - cs, idx[-1], np.uint32)])
-        n_real = int(np.sum(idx < cfg.n_paths))
-        for q in range(parts):
-            real = min(max(n_real - q * sub, 0), sub)
-            tasks.append((c, q, padded[q * sub : (q + 1) * sub], real))
+        n_real = min(max(cfg.n_paths - c * cs - q * sub, 0), sub, max(cs - q * sub, 0))
+        return c, q, padded[q * sub : (q + 1) * sub], n_real
+
     if not _can_serialize():
         raise SpecError(
             "backend 'processes' sends the kernel to its workers as serialized jax.export "
@@ -349,7 +356,10 @@ def run_chunks(
         imp, comp, cores = [], [], []
         for k in range(n_workers):
             msg = _recv(pool, k)
-            assert msg[0] == "ready", msg
+            if msg[0] != "ready":
+                err = DripCertError(f"worker process {k} could not compile the kernel: {msg[2]}")
+                err.add_note(f"worker traceback:\n{msg[3]}")
+                raise err
             imp.append(msg[1])
             comp.append(msg[2])
             cores.append(msg[3])
@@ -364,11 +374,11 @@ def run_chunks(
         absorbed = 0  # chunks of todo absorbed
         while absorbed < len(todo):
             # hand out: the least busy worker first, chunks within the memory window
-            while nxt < len(tasks) and tasks[nxt][0] < todo[0] + absorbed + max_in_flight:
+            while nxt < n_tasks and nxt // parts < absorbed + max_in_flight:
                 k = min(range(n_workers), key=lambda w: len(outstanding[w]))
                 if len(outstanding[k]) >= TASKS_PER_WORKER:
                     break
-                _send(pool, k, (nxt, tasks[nxt][2]))
+                _send(pool, k, (nxt, task(nxt)[2]))
                 outstanding[k].add(nxt)
                 nxt += 1
             ready = wait(pool.conns)
@@ -376,7 +386,7 @@ def run_chunks(
                 k = pool.conns.index(conn)  # type: ignore[arg-type]
                 msg = _recv(pool, k)
                 seq = msg[1]
-                c, q, _, n_real = tasks[seq]
+                c, q, _, n_real = task(seq)
                 if msg[0] == "error":
                     err = DripCertError(
                         f"chunk {c} failed in worker process {k}: {msg[2]}; the chunks absorbed "
