@@ -24,6 +24,8 @@ engine's sub-batch of :data:`~drip_cert.sim.engine.SUB_BATCH_PATHS` paths), the 
 All of it in float64 and float32 (``SimConfig(dtype="float32")``: states, noise, L1-DRAC and
 policy). The machine is shared and noisy: CPU time, medians of interleaved repeats; the wall-time
 rates of ``simulate`` (all workers, 2 workers / 1 worker) depend on the load printed with them.
+The 2 workers / 1 worker line times the local backend (worker threads) and the ``processes``
+backend (one process pinned to each core; its start-up, printed apart, is not in the run time).
 
 ``--float32`` also runs ``simulate`` in float32 end to end and with the policy alone in float32 and
 prints their rates, the ratio to float64 and the largest change of the gap means; ``--dask`` times
@@ -536,10 +538,18 @@ def main(argv: list[str] | None = None) -> int:
     if not args.no_profile:
         r1 = simulate(model, cfg, x0_sampler, progress=False, workers=1)
         r2 = simulate(model, cfg, x0_sampler, progress=False, workers=2)
+        p1, p2 = (
+            simulate(
+                model, cfg, x0_sampler, progress=False, backend=Backend("processes", n_workers=n)
+            )
+            for n in (1, 2)
+        )
         print(
             f"  engine, 1 worker: run {r1.run_s:.2f} s, 2 workers: {r2.run_s:.2f} s -> 2 workers "
-            f"/ 1 worker {r1.run_s / r2.run_s:.2f}x (wall time; load average "
-            f"{os.getloadavg()[0]:.1f})"
+            f"/ 1 worker {r1.run_s / r2.run_s:.2f}x as threads; as processes pinned to a core "
+            f"(--backend processes) 1 worker {p1.run_s:.2f} s, 2 workers {p2.run_s:.2f} s -> "
+            f"{p1.run_s / p2.run_s:.2f}x, start-up {p2.compile_s:.1f} s per call not included "
+            f"(wall time; load average {os.getloadavg()[0]:.1f})"
         )
     if args.all_scenarios:
         cfg4 = dataclasses.replace(cfg, scenarios=SCENARIOS)

@@ -16,7 +16,14 @@ compilation excluded, median of interleaved repeats):
   engine does);
 * ``processes``: one process pinned to core 0 simulating all paths, and two processes pinned
   to cores 0 and 1 simulating half of them each, started together (the upper bound of a
-  process-per-core engine; each process simulates its own paths 0..n/2-1: the same work).
+  process-per-core engine; each process simulates its own paths 0..n/2-1: the same work);
+* ``backend processes``: ``simulate(backend=Backend("processes", n_workers=w))`` for w = 1, 2
+  (the engine's process-per-core backend, :mod:`drip_cert.sim.process_backend`: the run time
+  excludes its start-up, which is printed apart: spawn + ``import jax`` + compile per worker,
+  concurrently; its CPU time is the workers' CPU time in their sub-batches).
+
+CPU ns per path-step of 2 workers against 1 worker is the CPU efficiency of the second worker
+(100 % = no loss); it is meaningful on a loaded machine too, the wall-time ratios are not.
 
 The numbers need quiet cores (load average printed). Usage: ``python benchmarks/mc_workers.py
 [--paths N] [--T T] [--dtype float32] [--sub-batch B] [--repeats R]``.
@@ -127,7 +134,11 @@ def main(argv: list[str] | None = None) -> int:
     cfg = _config(args.paths, args.T, args.dtype)
     for w in (1, 2):  # compile
         engine.simulate(model, cfg, mc.x0_sampler, progress=False, workers=w)
-    keys = ("threads 1", "threads 2", "procs 1", "procs 2")
+    from drip_cert.sim import process_backend
+    from drip_cert.sim.backend import Backend
+
+    keys = ("threads 1", "threads 2", "procs 1", "procs 2", "backend 1", "backend 2")
+    startup: list[float] = []
     t: dict[str, list[float]] = {k: [] for k in keys}
     c: dict[str, list[float]] = {k: [] for k in keys}
     for _ in range(args.repeats):
@@ -140,6 +151,15 @@ def main(argv: list[str] | None = None) -> int:
             wall, cpu = _processes(n, args.paths, args)
             t[f"procs {n}"].append(wall)
             c[f"procs {n}"].append(cpu)
+        for n in (1, 2):
+            r = engine.simulate(
+                model, cfg, mc.x0_sampler, progress=False, backend=Backend("processes", n_workers=n)
+            )
+            t[f"backend {n}"].append(r.run_s)
+            c[f"backend {n}"].append(process_backend.last_task_cpu_s)
+            startup.append(r.compile_s)
+    st = process_backend.last_startup
+    assert st is not None
     m = {k: statistics.median(v) for k, v in t.items()}
     ns = {k: statistics.median(v) / (args.paths * cfg.n_steps) * 1e9 for k, v in c.items()}
     sub = engine.SUB_BATCH_PATHS
@@ -157,6 +177,23 @@ def main(argv: list[str] | None = None) -> int:
         f"{m['procs 2']:.3f} s -> {m['procs 1'] / m['procs 2']:.2f}x; 1 pinned process / 1 "
         f"worker thread {m['threads 1'] / m['procs 1']:.2f}x (CPU ns per path-step "
         f"{ns['procs 1']:.0f} and {ns['procs 2']:.0f})"
+    )
+    print(
+        f"  backend processes: 1 worker {m['backend 1']:.3f} s, 2 workers {m['backend 2']:.3f} s "
+        f"-> 2 workers / 1 worker {m['backend 1'] / m['backend 2']:.2f}x (CPU ns per path-step "
+        f"{ns['backend 1']:.0f} and {ns['backend 2']:.0f}); start-up per call "
+        f"{statistics.median(startup):.2f} s (last, per worker: spawn + import "
+        + ", ".join(f"{x:.2f}" for x in st.import_s)
+        + " s, compile "
+        + ", ".join(f"{x:.2f}" for x in st.compile_s)
+        + f" s; cores {list(st.cores)})"
+    )
+    print(
+        "  CPU efficiency of the second worker (CPU ns per path-step, 1 worker / 2 workers): "
+        + ", ".join(
+            f"{name} {ns[f'{key} 1'] / ns[f'{key} 2']:.0%}"
+            for name, key in (("threads", "threads"), ("pinned", "procs"), ("backend", "backend"))
+        )
     )
     return 0
 

@@ -509,10 +509,12 @@ def _add_simulation_options(q: argparse.ArgumentParser) -> None:
     simulate."""
     q.add_argument(
         "--backend",
-        choices=["local", "dask"],
+        choices=["local", "processes", "dask"],
         default="local",
-        help="where the Monte Carlo runs: this process, or one task per chunk on Dask (a "
-        "LocalCluster unless --scheduler or DASK_SCHEDULER_ADDRESS names one); same numbers",
+        help="where the Monte Carlo runs: threads in this process, one worker process pinned to "
+        "each core (a few seconds to start; pays off for long runs), or one task per chunk on "
+        "Dask (a LocalCluster unless --scheduler or DASK_SCHEDULER_ADDRESS names one); same "
+        "numbers",
     )
     q.add_argument(
         "--scheduler",

@@ -135,5 +135,8 @@ def test_workers_benchmark_prints_threads_and_pinned_processes(capsys):
     if workers.main(["--paths", "256", "--T", "0.02", "--repeats", "1"]) == 1:
         pytest.skip("needs 2 usable cores")
     lines = capsys.readouterr().out.strip().splitlines()
-    assert re.search(r"threads \(the engine\): .* 2 workers / 1 worker \d+\.\d+x", lines[-2])
-    assert re.search(r"processes pinned to a core: .* -> \d+\.\d+x", lines[-1])
+    assert re.search(r"threads \(the engine\): .* 2 workers / 1 worker \d+\.\d+x", lines[-4])
+    assert re.search(r"processes pinned to a core: .* -> \d+\.\d+x", lines[-3])
+    assert re.search(r"backend processes: .* 2 workers / 1 worker \d+\.\d+x", lines[-2])
+    assert re.search(r"start-up per call \d+\.\d+ s", lines[-2])
+    assert re.fullmatch(r"  CPU efficiency .*: threads \d+%, pinned \d+%, backend \d+%", lines[-1])

@@ -1,10 +1,10 @@
-"""Where the chunks of a Monte-Carlo run are computed: this process, or a Dask cluster.
+"""Where the chunks of a Monte-Carlo run are computed: this process, worker processes, or Dask.
 
 A :class:`Backend` is an execution choice, not a setting of the run: it never changes a number
 (the noise of a path is a function of the seed and its global index, and the chunks are absorbed
 in order on the caller's side, whatever computed them), so it is not part of
 :class:`~drip_cert.sim.config.SimConfig` nor of the resume hash. A run started on one backend can
-be resumed on the other.
+be resumed on another.
 """
 
 from __future__ import annotations
@@ -16,9 +16,11 @@ from drip_cert.errors import SpecError
 
 __all__ = ["BACKENDS", "SCHEDULER_ENV", "Backend"]
 
-BACKENDS = ("local", "dask")
-"""``local``: compiled chunk calls from a thread pool in this process; ``dask``: one task per chunk
-on a ``dask.distributed`` cluster (:mod:`drip_cert.sim.dask_backend`)."""
+BACKENDS = ("local", "processes", "dask")
+"""``local``: compiled chunk calls from a thread pool in this process; ``processes``: one worker
+process per core, each pinned to its core before it imports jax
+(:mod:`drip_cert.sim.process_backend`); ``dask``: one task per chunk on a ``dask.distributed``
+cluster (:mod:`drip_cert.sim.dask_backend`)."""
 
 SCHEDULER_ENV = "DASK_SCHEDULER_ADDRESS"
 """Environment variable read for the scheduler address when none is given (Dask's own name)."""
@@ -31,14 +33,16 @@ class Backend:
     Parameters
     ----------
     kind
-        ``"local"`` (default) or ``"dask"``.
+        ``"local"`` (default), ``"processes"`` or ``"dask"``.
     scheduler
         ``dask`` only: address of a running scheduler (``tcp://host:8786``). ``None``: the
         environment variable ``DASK_SCHEDULER_ADDRESS``, else a ``LocalCluster`` started for the
         run (and closed after it).
     n_workers
-        ``dask`` without a scheduler: worker processes of the ``LocalCluster`` (``None``: the
-        usable CPU cores). Each worker runs one chunk at a time.
+        ``processes``: worker processes (``None``: the usable CPU cores; more than those are
+        pinned round robin). ``dask`` without a scheduler: worker processes of the
+        ``LocalCluster`` (``None``: the usable CPU cores). Each worker runs one chunk at a time.
+        ``local`` ignores it (``simulate(workers=...)`` sets its threads).
     connect_timeout
         Seconds to wait for the scheduler before giving up with an error.
     """
@@ -81,8 +85,9 @@ class Backend:
         return self.scheduler or os.environ.get(SCHEDULER_ENV) or None
 
     def describe(self) -> str:
-        """One line for reports: ``local`` or ``dask (scheduler ...)``/``dask (LocalCluster)``."""
-        if self.kind == "local":
-            return "local"
+        """One line for reports: ``local``, ``processes`` or ``dask (scheduler ...)``/``dask
+        (LocalCluster)``."""
+        if self.kind in ("local", "processes"):
+            return self.kind
         addr = self.address
         return f"dask (scheduler {addr})" if addr else "dask (LocalCluster)"

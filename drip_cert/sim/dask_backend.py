@@ -50,7 +50,7 @@ from drip_cert.sim.config import SimConfig
 from drip_cert.sim.kernel import ExportedChunk, build_chunk_fn
 from drip_cert.sim.resume import save_state
 
-__all__ = ["run_chunks"]
+__all__ = ["run_chunks", "run_indices"]
 
 WINDOW_PER_THREAD = 2
 """Chunks in flight per worker thread: one running, one queued behind it."""
@@ -99,13 +99,19 @@ def _compile_task(job: _ChunkJob) -> float:
     return time.perf_counter() - t0
 
 
+def run_indices(job: _ChunkJob, idx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The paths ``idx`` (``(batch,)`` uint32 global indices): ``(records (n_records, S, batch,
+    n), codes (S, batch))``, on host. The one chunk function of the out-of-process backends
+    (this one and :mod:`drip_cert.sim.process_backend`)."""
+    blocks, codes = job.kernel()(jnp.asarray(idx))
+    blocks, codes = jax.device_get((blocks, codes))
+    return np.concatenate(blocks, axis=0), np.asarray(codes)
+
+
 def _chunk_task(job: _ChunkJob, c: int) -> tuple[np.ndarray, np.ndarray]:
     """Chunk ``c``: ``(records (n_records, S, chunk_size, n), codes (S, chunk_size))``."""
     cs = job.exported.batch
-    idx = jnp.asarray(np.arange(c * cs, (c + 1) * cs, dtype=np.uint32))
-    blocks, codes = job.kernel()(idx)
-    blocks, codes = jax.device_get((blocks, codes))
-    return np.concatenate(blocks, axis=0), np.asarray(codes)
+    return run_indices(job, np.arange(c * cs, (c + 1) * cs, dtype=np.uint32))
 
 
 def _connect(backend: Backend, local_workers: int):

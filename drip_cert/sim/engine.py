@@ -47,7 +47,10 @@ is bit-for-bit that of an uninterrupted run (:mod:`drip_cert.sim.resume`).
 Backends. ``backend=Backend("dask", scheduler)`` computes the chunks as tasks on a Dask cluster
 (:mod:`drip_cert.sim.dask_backend`: the kernel travels as exported StableHLO, a lost worker costs
 only its chunks); the chunks are absorbed here in the same order, so the statistics and the
-resume files are the local backend's, bit for bit.
+resume files are the local backend's, bit for bit. ``backend=Backend("processes")`` runs one
+worker process per core, each pinned to its core before it imports jax
+(:mod:`drip_cert.sim.process_backend`: XLA's thread pool then stays on that core; start-up of a
+few seconds per call), with the same sub-batches and the same bits.
 
 Float32. ``SimConfig(policy_dtype="float32")`` evaluates the learned policy in float32
 (:mod:`drip_cert.sim.precision`), everything else in float64; ``SimConfig(dtype="float32")``
@@ -78,6 +81,7 @@ from tqdm.auto import tqdm
 from drip_cert._jax import jax, jnp
 from drip_cert.errors import SpecError
 from drip_cert.model.numeric import SimModel
+from drip_cert.sim import process_backend
 from drip_cert.sim.accumulate import RunState, absorb, new_state
 from drip_cert.sim.backend import Backend
 from drip_cert.sim.config import SimConfig
@@ -146,7 +150,10 @@ def simulate(
         :class:`~drip_cert.sim.backend.Backend`: ``None`` or ``Backend()`` runs here;
         ``Backend("dask", scheduler)`` runs one task per chunk on a Dask cluster
         (:mod:`drip_cert.sim.dask_backend`; ``workers`` is then the size of the LocalCluster
-        started when no scheduler is named). The same numbers and resume files either way.
+        started when no scheduler is named); ``Backend("processes")`` runs one worker process
+        per core (:mod:`drip_cert.sim.process_backend`; ``workers`` is then the number of
+        processes unless ``Backend.n_workers`` gives it). The same numbers and resume files
+        whichever backend.
 
     Returns
     -------
@@ -207,16 +214,33 @@ def simulate(
                 max_in_flight=max(1, _MAX_CHUNK_BYTES // max(rec_bytes, 1)),
                 local_workers=n_local,
             )
+    elif todo and backend.kind == "processes":
+        n_proc = backend.n_workers or (default_workers() if workers is None else int(workers))
+        if n_proc < 1:
+            raise SpecError(f"workers must be >= 1, got {workers!r}", field="workers")
+        parts, sub = _sub_batches(cfg, n_proc, len(todo))
+        show = progress if progress is not None else sys.stderr.isatty()
+        kern = build_chunk_fn(model, cfg, x0_sampler, x0_bar_sampler)
+        with _bar(cfg, state, show) as bar:
+            state, compile_s, t_run = process_backend.run_chunks(
+                lambda: kern.export(sub),
+                cfg,
+                state,
+                todo,
+                rdir,
+                bar,
+                n_workers=n_proc,
+                parts=parts,
+                sub=sub,
+                max_in_flight=max(1, _MAX_CHUNK_BYTES // max(rec_bytes, 1)),
+            )
     elif todo:
         n_workers = default_workers() if workers is None else int(workers)
         if n_workers < 1:
             raise SpecError(f"workers must be >= 1, got {workers!r}", field="workers")
         # memory: at most _MAX_CHUNK_BYTES of records in flight
         n_workers = max(1, min(n_workers, _MAX_CHUNK_BYTES // max(rec_bytes, 1)))
-        # sub-batches: enough to keep every worker busy, and small enough for the cache
-        parts = max(1, min(n_workers // len(todo), cfg.chunk_size))
-        parts = max(parts, -(-cfg.chunk_size // SUB_BATCH_PATHS))
-        sub = -(-cfg.chunk_size // parts)  # paths per call; the last part is padded
+        parts, sub = _sub_batches(cfg, n_workers, len(todo))
         t0 = time.perf_counter()
         kernel = build_chunk_fn(model, cfg, x0_sampler, x0_bar_sampler).compile(sub)
         compile_s = time.perf_counter() - t0
@@ -269,6 +293,15 @@ def simulate(
                 state = finish(state, pending.popleft())
         t_run = time.perf_counter() - t1
     return build_result(model.name, cfg, h, state, compile_s, t_run)
+
+
+def _sub_batches(cfg: SimConfig, n_workers: int, n_chunks: int) -> tuple[int, int]:
+    """``(parts, sub)``: each chunk is simulated as ``parts`` calls of ``sub`` paths (the last
+    one padded): enough to keep every worker busy, and at most :data:`SUB_BATCH_PATHS` paths
+    for the cache."""
+    parts = max(1, min(n_workers // n_chunks, cfg.chunk_size))
+    parts = max(parts, -(-cfg.chunk_size // SUB_BATCH_PATHS))
+    return parts, -(-cfg.chunk_size // parts)
 
 
 def _bar(cfg: SimConfig, state: RunState, show: bool) -> tqdm:
