@@ -23,8 +23,8 @@ pinned round robin. Each worker receives the run's kernel as exported StableHLO
 :class:`~drip_cert.sim.dask_backend._ChunkJob`), compiles it once, and then simulates sub-batches
 of paths given by their global indices (:func:`~drip_cert.sim.dask_backend.run_indices`) - the
 same sub-batches as the local backend, so that each call's activations stay in the core's cache.
-Serializing the kernel needs the optional package ``flatbuffers`` (as for Dask); without it the
-run stops before any worker starts, with a message saying what to install.
+Serializing the kernel needs the package ``flatbuffers`` (a core dependency, as for Dask); without
+it the run stops before any worker starts, with a message saying what to install.
 The caller absorbs the chunks IN ORDER (:func:`~drip_cert.sim.accumulate.absorb`), so the
 statistics and resume files are the local backend's, bit for bit (``tests/test_engine.py``).
 
@@ -251,7 +251,7 @@ class _Pool:
 
 
 def _can_serialize() -> bool:
-    """Whether ``jax.export`` can serialize here (it needs the optional package flatbuffers)."""
+    """Whether ``jax.export`` can serialize here (it needs the package flatbuffers)."""
     return importlib.util.find_spec("flatbuffers") is not None
 
 
@@ -343,8 +343,8 @@ def run_chunks(
     if not _can_serialize():
         raise SpecError(
             "backend 'processes' sends the kernel to its workers as serialized jax.export "
-            "programs, which needs the package flatbuffers: pip install flatbuffers (or "
-            "drip-cert[dask]), or use --backend local",
+            "programs, which needs the package flatbuffers (a dependency of drip-cert that is "
+            "missing here): pip install flatbuffers, or use --backend local",
             field="backend",
         )
     pool = _Pool(n_workers)
