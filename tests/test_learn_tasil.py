@@ -405,11 +405,14 @@ def test_tasil_beats_bc_with_the_default_budget(demos, heldout_x0, seed):
 # --- cost of a step and of a recorded loss (issue 24: 4000 samples per trajectory) -------------
 
 
-def test_a_step_draws_its_batch_without_permuting_the_pool(demos):
-    """Mini-batches are drawn with replacement (``randint``, O(batch)): the compiled steps hold
-    no sort, where ``choice(replace=False)`` sorted a permutation of the whole pool every step."""
+def test_a_step_on_a_large_pool_draws_its_batch_without_permuting_the_pool(demos):
+    """Above ``PERMUTE_MAX`` entries mini-batches are drawn with replacement (``randint``,
+    O(batch)): the compiled steps hold no sort, where ``choice(replace=False)``, kept for small
+    pools (the batches of earlier versions), sorts a permutation of the whole pool every step."""
     from drip_cert.learn import tasil as T
 
+    assert not T._draw_with_replacement(T.PERMUTE_MAX)
+    assert T._draw_with_replacement(T.PERMUTE_MAX + 1)
     spec = LossSpec()
     pool = expert_targets(expert, demos.states[:, :-1], demos.actions[:, :-1], 1).flat()
     params = jax_params(init_mlp((4, 8, 1), np.random.default_rng(0), "tanh", None))
@@ -418,9 +421,15 @@ def test_a_step_draws_its_batch_without_permuting_the_pool(demos):
     net = T._Net("tanh", None)
     kw = dict(net=net, spec=spec, schedule="cosine", n_steps=3, batch_size=16, axis=1)
     args = (params, opt_state, jax.random.PRNGKey(0), jnp.asarray(0), pool, lr_args)
-    text = str(jax.make_jaxpr(lambda *a: T._run_chunk(*a, jnp.zeros((2, 4)), **kw))(*args))
-    assert "random_bits" in text  # the batches are drawn in the compiled steps
-    assert re.search(r"\bsort\[", text) is None  # the primitive, not a gather's keyword
+    box = jnp.zeros((2, 4))
+
+    def program(replace: bool) -> str:
+        return str(jax.make_jaxpr(lambda *a: T._run_chunk(*a, box, replace=replace, **kw))(*args))
+
+    sort = re.compile(r"\bsort\[")  # the primitive, not a gather's keyword
+    assert "random_bits" in program(True)  # the batches are drawn in the compiled steps
+    assert sort.search(program(True)) is None
+    assert sort.search(program(False)) is not None  # the small pools' draw: the test can fail
 
 
 def test_recorded_losses_use_a_fixed_seeded_subset_of_a_large_split(demos, monkeypatch):
