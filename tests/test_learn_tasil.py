@@ -5,6 +5,7 @@ paper-like 4-D system."""
 from __future__ import annotations
 
 import math
+import re
 from pathlib import Path
 
 import numpy as np
@@ -399,3 +400,56 @@ def test_tasil_beats_bc_with_the_default_budget(demos, heldout_x0, seed):
     out = _gaps(demos, heldout_x0, seed=seed)
     print(f"seed {seed}: (mean gap, max gap, wall s) {out}")
     assert out["tasil"][0] < out["bc"][0], out
+
+
+# --- cost of a step and of a recorded loss (issue 24: 4000 samples per trajectory) -------------
+
+
+def test_a_step_on_a_large_pool_draws_its_batch_without_permuting_the_pool(demos):
+    """Above ``PERMUTE_MAX`` entries mini-batches are drawn with replacement (``randint``,
+    O(batch)): the compiled steps hold no sort, where ``choice(replace=False)``, kept for small
+    pools (the batches of earlier versions), sorts a permutation of the whole pool every step."""
+    from drip_cert.learn import tasil as T
+
+    assert not T._draw_with_replacement(T.PERMUTE_MAX)
+    assert T._draw_with_replacement(T.PERMUTE_MAX + 1)
+    spec = LossSpec()
+    pool = expert_targets(expert, demos.states[:, :-1], demos.actions[:, :-1], 1).flat()
+    params = jax_params(init_mlp((4, 8, 1), np.random.default_rng(0), "tanh", None))
+    lr_args = (jnp.asarray(1e-3), jnp.asarray(10.0))
+    opt_state = T._adam(*lr_args, "cosine").init(params)
+    net = T._Net("tanh", None)
+    kw = dict(net=net, spec=spec, schedule="cosine", n_steps=3, batch_size=16, axis=1)
+    args = (params, opt_state, jax.random.PRNGKey(0), jnp.asarray(0), pool, lr_args)
+    box = jnp.zeros((2, 4))
+
+    def program(replace: bool) -> str:
+        return str(jax.make_jaxpr(lambda *a: T._run_chunk(*a, box, replace=replace, **kw))(*args))
+
+    sort = re.compile(r"\bsort\[")  # the primitive, not a gather's keyword
+    assert "random_bits" in program(True)  # the batches are drawn in the compiled steps
+    assert sort.search(program(True)) is None
+    assert sort.search(program(False)) is not None  # the small pools' draw: the test can fail
+
+
+def test_recorded_losses_use_a_fixed_seeded_subset_of_a_large_split(demos, monkeypatch):
+    """Above ``EVAL_STATES`` states a recorded loss is the mean over a fixed seeded subset: the
+    restored held-out loss is the loss of the returned MLP on that subset (recomputed here), the
+    same at every evaluation and in every run of the same seed."""
+    from drip_cert.learn import tasil as T
+
+    monkeypatch.setattr(T, "EVAL_STATES", 256)
+    a = train_policy(demos, expert, seed=5, **SMALL)
+    b = train_policy(demos, expert, seed=5, **SMALL)
+    assert a.history == b.history
+    val = demos.subset(np.array(a.val_index))
+    targets = expert_targets(expert, val.states[:, :-1], val.actions[:, :-1], 1)
+    n_states = targets.states.shape[0] * targets.states.shape[1]
+    assert n_states > 256  # the subset is a strict one
+    idx = np.sort(
+        np.random.default_rng((5, T.EVAL_STREAM_VAL)).choice(n_states, 256, replace=False)
+    )
+    sub = targets.flat().map_arrays(lambda x: x[:, jnp.asarray(idx)])
+    loss = jax.jit(lambda t: imitation_loss(a.mlp.apply_jax, t, LossSpec()))
+    assert float(loss(sub)) == pytest.approx(a.best_val_loss, rel=CLOSED_FORM_RTOL)
+    assert float(loss(targets)) != pytest.approx(a.best_val_loss, rel=CLOSED_FORM_RTOL)
