@@ -1,14 +1,15 @@
 """Training imitation policies by TaSIL or behaviour cloning (BC), and measuring the gap.
 
-:func:`train_policy` fits an MLP policy ``pi_hat`` with smooth activations to expert
-demonstrations (:class:`~drip_cert.learn.data.Demonstrations`) by minimising the TaSIL loss of
-DRIP eq. (LossTaSIL) (value + Jacobian matching, order 1, optionally + Hessian, order 2) or the BC
-loss (value matching only); see :mod:`drip_cert.learn.losses`. The optimiser is Adam (optax) on
-seeded mini-batches (drawn with replacement from a pool of more than ``PERMUTE_MAX`` entries),
-with jit-compiled steps run ``eval_every`` at a time under ``lax.scan``. A seeded share of the trajectories is held out; the held-out loss (over a
-fixed seeded subset of at most ``EVAL_STATES`` states for the mean reduction) is evaluated every
-``eval_every`` steps and training stops when it has not improved for ``patience`` steps; the best
-parameters are restored. Same seed and data -> bit-identical weights.
+:func:`train_policy` fits an MLP policy ``pi_hat`` with smooth activations to expert demonstrations
+(:class:`~drip_cert.learn.data.Demonstrations`) by minimising the TaSIL loss of DRIP eq.
+(LossTaSIL) (value + Jacobian matching, order 1, optionally + Hessian, order 2) or the BC loss
+(value matching only); see :mod:`drip_cert.learn.losses`. The optimiser is Adam (optax) on seeded
+mini-batches (drawn with replacement from a pool of more than ``PERMUTE_MAX`` entries), with
+jit-compiled steps run ``eval_every`` at a time under ``lax.scan``. A seeded share of the
+trajectories is held out; the held-out loss (over a fixed seeded subset of at most ``EVAL_STATES``
+states for the mean reduction) is evaluated every ``eval_every`` steps and training stops when it
+has not improved for ``patience`` steps; the best parameters are restored. Same seed and data ->
+bit-identical weights.
 
 :func:`evaluate_gap` measures the imitation gap the TaSIL code reports: expert and learner
 closed loops from the same initial states, the same integrator, and per trajectory
