@@ -288,7 +288,7 @@ def decompose_jacobian(
     dvars = list(slots)
     p, q = M.shape
     d = len(x)
-    zero = {v: 0 for v in dvars}
+    zero = {v: sp.S.Zero for v in dvars}
     A = np.zeros((p, q))
     varying: list[StatePart] = []
     for j in range(p):
@@ -296,7 +296,7 @@ def decompose_jacobian(
             e = lin[j, i]
             if e.free_symbols - set(dvars) - set(x):
                 return None
-            e0 = e.xreplace(zero)
+            e0 = sp.sympify(e.xreplace(zero))
             coef = [sp.diff(e, dv) for dv in dvars]
             # linear in the block Jacobian entries with constant coefficients
             if any(c.free_symbols for c in coef):
