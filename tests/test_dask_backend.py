@@ -6,6 +6,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import os
+import re
 import signal
 import threading
 import time
@@ -166,6 +167,48 @@ def test_cli_scheduler_without_dask_is_a_usage_error(capsys):
     assert "needs backend 'dask'" in capsys.readouterr().err
 
 
+def _cancel_chunk_submissions(monkeypatch, chunk: int, times: int) -> list[str]:
+    """Make the cluster cancel the first ``times`` submissions of chunk ``chunk`` (as the
+    scheduler does for a key it has forgotten); returns the keys cancelled."""
+    cancelled: list[str] = []
+    submit = distributed.Client.submit
+
+    def cancelling_submit(self, func, *args, key=None, **kwargs):
+        fut = submit(self, func, *args, key=key, **kwargs)
+        if re.fullmatch(rf"drip-chunk-[0-9a-f]+-{chunk}(-retry\d+)?", str(key)):
+            if len(cancelled) < times:
+                cancelled.append(str(key))
+                self.cancel([fut])
+        return fut
+
+    monkeypatch.setattr(distributed.Client, "submit", cancelling_submit)
+    return cancelled
+
+
+def test_a_chunk_cancelled_by_the_cluster_is_submitted_again(
+    cluster, model, local_result, monkeypatch
+):
+    """A chunk future cancelled by the cluster (CI saw ``already forgotten`` for a chunk lost
+    with a killed worker) is submitted again under its key: the same bits as the local run."""
+    cancelled = _cancel_chunk_submissions(monkeypatch, chunk=1, times=2)
+    backend = Backend("dask", cluster.scheduler_address)
+    res = simulate(model, _CFG, _x0, _x0_bar, progress=False, backend=backend)
+    assert len(cancelled) == 2
+    _assert_bitwise(local_result, res)
+
+
+def test_a_chunk_cancelled_again_and_again_ends_the_run_with_a_clear_error(
+    cluster, model, monkeypatch
+):
+    from drip_cert.errors import DripCertError
+    from drip_cert.sim.dask_backend import MAX_RESUBMIT
+
+    _cancel_chunk_submissions(monkeypatch, chunk=1, times=MAX_RESUBMIT + 1)
+    backend = Backend("dask", cluster.scheduler_address)
+    with pytest.raises(DripCertError, match="cancelled chunk 1 4 times"):
+        simulate(model, _CFG, _x0, _x0_bar, progress=False, backend=backend)
+
+
 def test_a_killed_worker_reruns_only_its_chunks(model, local_result):
     """SIGKILL one worker while it runs a chunk: the nanny restarts it, the scheduler re-runs
     that chunk elsewhere, the chunks already absorbed are not recomputed, and the result is the
@@ -211,8 +254,8 @@ def test_a_killed_worker_reruns_only_its_chunks(model, local_result):
     _assert_bitwise(local, res)
     runs: dict[str, list[str]] = {}
     for t in ts.data:
-        if str(t["key"]).startswith("drip-chunk-"):
-            runs.setdefault(str(t["key"]), []).append(t["worker"])
+        if str(t["key"]).startswith("drip-chunk-"):  # a chunk cancelled by the cluster: -retryN
+            runs.setdefault(str(t["key"]).split("-retry")[0], []).append(t["worker"])
     assert len(runs) == cfg.n_chunks  # every chunk completed
     assert victim not in runs[key]  # the chunk killed with its worker finished elsewhere
     # chunks done before the kill were absorbed and released: at most the in-flight window

@@ -22,7 +22,11 @@ Failures. A worker that dies loses the chunks it was running or holding; the sch
 exactly those on the other workers (chunks already absorbed were released and are not
 recomputed). A chunk whose task kills ``distributed.scheduler.allowed-failures`` workers (3 by
 default) ends the run with a :class:`~drip_cert.errors.DripCertError`; the run directory keeps
-every chunk absorbed before, and the same call resumes after the last one.
+every chunk absorbed before, and the same call resumes after the last one. A chunk whose future
+the scheduler cancels (seen once in CI: ``FutureCancelledError ... already forgotten`` for a
+chunk whose result was lost with a killed worker) is submitted again, as the task
+``drip-chunk-<hash>-<c>-retry<n>``, at most ``MAX_RESUBMIT`` times: a chunk is a function of its
+index only, so the numbers do not change.
 
 Progress. The bar (path-steps, on the caller's stderr) advances when a chunk finishes anywhere in
 the cluster; Dask's dashboard shows the task stream per worker.
@@ -32,6 +36,7 @@ the cluster; Dask's dashboard shows the task stream per worker.
 
 from __future__ import annotations
 
+import concurrent.futures
 import hashlib
 import threading
 import time
@@ -51,6 +56,9 @@ from drip_cert.sim.kernel import ExportedChunk, build_chunk_fn
 from drip_cert.sim.resume import save_state
 
 __all__ = ["run_chunks", "run_indices"]
+
+MAX_RESUBMIT = 3
+"""Submissions again of one chunk whose future was cancelled by the cluster, before giving up."""
 
 WINDOW_PER_THREAD = 2
 """Chunks in flight per worker thread: one running, one queued behind it."""
@@ -208,12 +216,18 @@ def run_chunks(
         ac = as_completed()
         nxt = 0  # position in todo of the next chunk to submit
         absorbed = 0
+        resubmitted: dict[int, int] = {}
+
+        def submit(c: int) -> None:
+            n = resubmitted.get(c, 0)  # a key of its own per try: a cancelled key may linger
+            key = f"drip-chunk-{tag}-{c}" + (f"-retry{n}" if n else "")
+            fut = client.submit(_chunk_task, job, c, key=key, pure=False)
+            chunk_of[fut.key] = c
+            ac.add(fut)
+
         while absorbed < len(todo):
             while nxt < len(todo) and nxt - absorbed < window:
-                c = todo[nxt]
-                fut = client.submit(_chunk_task, job, c, key=f"drip-chunk-{tag}-{c}", pure=False)
-                chunk_of[fut.key] = c
-                ac.add(fut)
+                submit(todo[nxt])
                 nxt += 1
             fut = next(ac)
             c = chunk_of.pop(fut.key)
@@ -225,6 +239,17 @@ def run_chunks(
                     "before it are saved in the run directory (with --out / run_dir) and the "
                     "same command resumes after them"
                 ) from None
+            except concurrent.futures.CancelledError as exc:
+                fut.release()
+                resubmitted[c] = resubmitted.get(c, 0) + 1
+                if resubmitted[c] > MAX_RESUBMIT:
+                    raise DripCertError(
+                        f"the cluster cancelled chunk {c} {resubmitted[c]} times ({exc}); the "
+                        "chunks before it are saved in the run directory (with --out / "
+                        "run_dir) and the same command resumes after them"
+                    ) from None
+                submit(c)  # a chunk is a function of its index only: the same numbers
+                continue
             fut.release()
             n_real = min(cfg.n_paths - c * cfg.chunk_size, cfg.chunk_size)
             bar.update(n_real * cfg.n_steps)
