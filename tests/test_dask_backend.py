@@ -263,15 +263,69 @@ def test_a_killed_worker_reruns_only_its_chunks(model, local_result):
     assert sum(len(w) for w in runs.values()) <= cfg.n_chunks + 4
 
 
+def test_the_job_lost_with_every_worker_holding_it_is_recomputed(model):
+    """CI saw every chunk cancelled for "lost dependencies": the kernel's bytes were scattered
+    data, Dask's active memory manager kept one replica, and its worker was killed. Kill every
+    worker that holds the job while a chunk runs: the job is recomputed from its spec, and the
+    result is the local one, bit for bit (with a scattered job this run ends in the error)."""
+    cfg = dataclasses.replace(_CFG, T=2.0, n_paths=12_000, chunk_size=1500, w2_times=(1.0,))
+    local = simulate(model, cfg, _x0, _x0_bar, progress=False)
+    with (
+        distributed.LocalCluster(
+            n_workers=2,
+            threads_per_worker=1,
+            processes=True,
+            host="127.0.0.1",
+            dashboard_address=":0",
+        ) as cl,
+        distributed.Client(cl) as client,
+    ):
+        pids = client.run(os.getpid)
+        out: dict = {}
+
+        def run():
+            try:
+                out["res"] = simulate(
+                    model,
+                    cfg,
+                    _x0,
+                    _x0_bar,
+                    progress=False,
+                    backend=Backend("dask", cl.scheduler_address),
+                )
+            except BaseException as exc:  # re-raised in the test's thread below
+                out["err"] = exc
+
+        th = threading.Thread(target=run)
+        th.start()
+        _wait_for_running_chunk(client, min_chunk=1)
+        # the job: all data but chunk results (named drip-job-..., a scattered _ChunkJob-... before)
+        holders = {
+            w
+            for k, ws in client.who_has().items()
+            if not str(k).startswith("drip-chunk-")
+            for w in ws
+        }
+        assert holders  # the job is held somewhere while a chunk runs
+        for w in holders:
+            os.kill(pids[w], signal.SIGKILL)
+        th.join(KILL_WAIT_S)
+        assert not th.is_alive()
+        if "err" in out:
+            raise out["err"]
+    _assert_bitwise(local, out["res"])
+
+
 def _wait_for_running_chunk(client, min_chunk: int) -> tuple[str, str]:
-    """(worker address, task key) of a chunk task with index >= ``min_chunk`` now running."""
+    """(worker address, task key) of a chunk task with index >= ``min_chunk`` now running (keys
+    ``drip-chunk-<hash>-<c>`` or, for a chunk submitted again, ``...-<c>-retry<n>``)."""
     t_end = time.monotonic() + KILL_WAIT_S
     while time.monotonic() < t_end:
         for worker, keys in client.processing().items():
             for key in keys:
-                k = str(key)
-                if k.startswith("drip-chunk-") and int(k.rsplit("-", 1)[1]) >= min_chunk:
-                    return worker, k
+                m = re.fullmatch(r"drip-chunk-[0-9a-f]+-(\d+)(-retry\d+)?", str(key))
+                if m and int(m.group(1)) >= min_chunk:
+                    return worker, str(key)
         time.sleep(0.02)
     raise AssertionError("no chunk task started in time")
 

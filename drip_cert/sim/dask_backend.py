@@ -1,17 +1,20 @@
 """The Dask backend of :func:`~drip_cert.sim.engine.simulate`: one task per chunk on a cluster.
 
 Design. The run's kernel is lowered here, for batches of ``chunk_size`` paths, and exported as
-serialized StableHLO (:meth:`~drip_cert.sim.kernel.ChunkKernel.export`); those bytes are scattered
-once to every worker (one :class:`_ChunkJob`, which compiles them on first use and keeps the
-programs for the worker's later tasks). No Python code of the model travels: a system lowered from
-a spec's sympy expressions runs remotely as well as a hand-written one, and a worker needs only
-drip-cert and jax installed. Chunk ``c`` is the task ``drip-chunk-<hash>-<c>``: it simulates
-the paths ``c * chunk_size ..`` with the same kernel as the local backend and returns their
-recorded states and status codes. The caller absorbs the chunks IN ORDER
-(:func:`~drip_cert.sim.accumulate.absorb`) and, with a run directory, writes the state after each
-one (:mod:`drip_cert.sim.resume`). Since the noise and the initial states of a path are functions
-of the seed and its global index, the statistics and the resume files are those of the local
-backend, bit for bit, whatever worker computed what (``tests/test_dask_backend.py``).
+serialized StableHLO (:meth:`~drip_cert.sim.kernel.ChunkKernel.export`); those bytes are the task
+``drip-job-<hash>-<nonce>`` (one :class:`_ChunkJob`, which compiles them on first use and keeps the
+programs for the worker's later tasks), which every chunk task depends on. A task, not scattered
+data: Dask's active memory manager keeps only the replicas that waiting tasks need, and scattered
+data whose last replica dies with a worker cannot be recomputed (every chunk would be cancelled for
+"lost dependencies"); a task is recomputed from its spec, the bytes. No Python code of the model
+travels: a system lowered from a spec's sympy expressions runs remotely as well as a hand-written
+one, and a worker needs only drip-cert and jax installed. Chunk ``c`` is the task
+``drip-chunk-<hash>-<c>``: it simulates the paths ``c * chunk_size ..`` with the same kernel as the
+local backend and returns their recorded states and status codes. The caller absorbs the chunks IN
+ORDER (:func:`~drip_cert.sim.accumulate.absorb`) and, with a run directory, writes the state after
+each one (:mod:`drip_cert.sim.resume`). Since the noise and the initial states of a path are
+functions of the seed and its global index, the statistics and the resume files are those of the
+local backend, bit for bit, whatever worker computed what (``tests/test_dask_backend.py``).
 
 Flow control. At most ``2 x (worker threads)`` chunks are submitted and not yet absorbed (each
 worker has one chunk running and one queued, so none idles between tasks), and never more than
@@ -40,6 +43,7 @@ import concurrent.futures
 import hashlib
 import threading
 import time
+import uuid
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -196,7 +200,12 @@ def run_chunks(
     client, cluster = _connect(backend, local_workers)
     try:
         exported = build_chunk_fn(model, cfg, x0_sampler, x0_bar_sampler).export(cfg.chunk_size)
-        job = client.scatter(_ChunkJob(exported), broadcast=True, hash=False)
+        tag = settings_hash[:12]
+        # The job is a task, not scattered data: Dask's active memory manager drops replicas that
+        # no waiting task needs, so a scattered job may live on one worker only, and when that
+        # worker dies, every chunk is cancelled for "lost dependencies" (seen in CI). A task's
+        # result is recomputed from its spec (the exported bytes) when its last replica is lost.
+        job = client.submit(_ChunkJob, exported, key=f"drip-job-{tag}-{uuid.uuid4().hex[:8]}")
         workers = client.scheduler_info(n_workers=-1)["workers"]
         if not workers:
             raise SpecError(
@@ -209,7 +218,6 @@ def run_chunks(
         client.gather([client.submit(_compile_task, job, workers=[w], pure=False) for w in workers])
         compile_s = time.perf_counter() - t0
         window = max(1, min(WINDOW_PER_THREAD * threads, max_in_flight))
-        tag = settings_hash[:12]
         t1 = time.perf_counter()
         done: dict[int, tuple[np.ndarray, np.ndarray]] = {}
         chunk_of: dict[str, int] = {}
