@@ -58,7 +58,7 @@ def cmd_check_spec(args: argparse.Namespace) -> int:
 
 
 def cmd_certify(args: argparse.Namespace) -> int:
-    from drip_cert.bounds.certificate import certify  # scipy: off the start-up path
+    from drip_cert.bounds.certificate import certify  # sympy: off the start-up path
     from drip_cert.report import certificate_markdown  # numpy: off the start-up path
     from drip_cert.spec import load_spec  # sympy: off the start-up path
 

@@ -39,7 +39,6 @@ from typing import Any, ClassVar
 
 import numpy as np
 from flint import arb
-from scipy.special import erf, expit, ndtr
 
 from drip_cert.errors import SpecError
 from drip_cert.numerics.interval_np import (
@@ -578,6 +577,13 @@ def _sigmoid_second_point(z: np.ndarray) -> Pair:
     return -p_hi, -p_lo
 
 
+def _expit(z):
+    """scipy's logistic ``1 / (1 + e^{-z})``, elementwise (no overflow for large ``|z|``)."""
+    from scipy.special import expit  # scipy: 0.13 CPU-s to import, sigmoid and SiLU only
+
+    return expit(z)
+
+
 @dataclass(frozen=True)
 class Sigmoid(Activation):
     """The logistic ``sigma(z) = 1 / (1 + e^{-z})``: increasing, values in ``(0, 1)``.
@@ -593,7 +599,7 @@ class Sigmoid(Activation):
 
     def apply(self, z, xp=np):
         if xp is np:
-            return expit(z)
+            return _expit(z)
         import jax  # jax: keep off the CLI start-up path
 
         return jax.nn.sigmoid(z)
@@ -656,7 +662,7 @@ class Softplus(Activation):
         return xp.logaddexp(z, 0.0)
 
     def prime_np(self, z):
-        return expit(_arr(z))
+        return _expit(_arr(z))
 
     def _value_point(self, z):
         e_lo, e_hi = exp_bounds(-np.abs(z))
@@ -711,7 +717,7 @@ class Silu(Activation):
 
     def prime_np(self, z):
         z = _arr(z)
-        s = expit(z)
+        s = _expit(z)
         return s + z * s * (1.0 - s)
 
     def _value_point(self, z):
@@ -732,7 +738,7 @@ class Silu(Activation):
 
 
 def _float_sigma(z: float) -> float:
-    return float(expit(z))
+    return float(_expit(z))
 
 
 @functools.cache
@@ -885,12 +891,16 @@ class Gelu(Activation):
 
     def apply(self, z, xp=np):
         if xp is np:
+            from scipy.special import erf  # scipy: 0.13 CPU-s to import, GELU only
+
             return 0.5 * z * (1.0 + erf(z / np.sqrt(2.0)))
         from jax.scipy.special import erf as jax_erf  # jax: keep off the CLI start-up path
 
         return 0.5 * z * (1.0 + jax_erf(z / np.sqrt(2.0)))
 
     def prime_np(self, z):
+        from scipy.special import ndtr  # scipy: 0.13 CPU-s to import, GELU only
+
         z = _arr(z)
         return ndtr(z) + z * _INV_SQRT_2PI * np.exp(-0.5 * z * z)
 

@@ -20,7 +20,6 @@ import functools
 
 import numpy as np
 from flint import arb
-from scipy.special import ndtr
 
 from drip_cert.numerics.rounding import (
     LIBM_REL,
@@ -220,6 +219,8 @@ def Phi_bounds(z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Enclosure of the normal CDF ``Phi(z)`` (scipy ``ndtr``: ``erfc`` in the tails, no
     cancellation) widened by its error budget
     :func:`~drip_cert.numerics.rounding.ndtr_rel_budget`."""
+    from scipy.special import ndtr  # scipy: 0.13 CPU-s to import, only GELU bounds need it
+
     lo, hi = widen_np(ndtr(z), ndtr_rel_budget(z))
     return np.clip(lo, 0.0, 1.0), np.clip(hi, 0.0, 1.0)
 

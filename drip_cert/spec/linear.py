@@ -26,7 +26,6 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-import scipy.linalg
 import sympy as sp
 
 from drip_cert.errors import SpecError
@@ -471,6 +470,8 @@ def lqr_expert(
             "unobservable from Q, so the Riccati equation has no stabilising solution; weight "
             f"those states, e.g. Q = {_example(n, n, True)}",
         )
+    import scipy.linalg  # scipy: 0.1 CPU-s to import, only an LQR expert needs it
+
     try:
         P = scipy.linalg.solve_continuous_are(A, B, Q, R)
         K = np.linalg.solve(R, B.T @ P)

@@ -27,6 +27,7 @@ Each constant is a :class:`~drip_cert.provenance.Quantity` that records how it w
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
@@ -345,13 +346,21 @@ def _input_constants_on_box(s: System, box: np.ndarray) -> InputConstants:
 
 # ---------------------------------------------------------------------- sampled sup estimates
 def batch_fn(s: System, exprs: sp.MatrixBase) -> Callable[[float, np.ndarray], np.ndarray]:
-    """numpy-facing batched evaluation ``(t, X (N, n)) -> (N, ...)`` of system expressions."""
-    from drip_cert._jax import jax, jnp  # jax: keep off the API's import path
+    """numpy-facing batched evaluation ``(t, X (N, n)) -> (N, ...)`` of system expressions.
 
-    fn = jax.jit(jax.vmap(s.lower(exprs), in_axes=(None, 0)))
+    The expressions are lowered to jax and compiled on the first call only: a constant that a
+    sound route bounds never evaluates them, and then jax (0.3 CPU-s to import) is not imported.
+    """
+
+    @functools.cache
+    def compiled() -> Callable[[float, np.ndarray], np.ndarray]:
+        from drip_cert._jax import jax, jnp  # jax: keep off the API's import path
+
+        fn = jax.jit(jax.vmap(s.lower(exprs), in_axes=(None, 0)))
+        return lambda tt, X: fn(jnp.float64(tt), jnp.asarray(X, dtype=jnp.float64))
 
     def call(tt: float, X: np.ndarray) -> np.ndarray:
-        return np.asarray(fn(jnp.float64(tt), jnp.asarray(X, dtype=jnp.float64)))
+        return np.asarray(compiled()(tt, X))
 
     return call
 
