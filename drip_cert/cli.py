@@ -711,11 +711,14 @@ def console_main() -> int:
     changes nothing a user sees. Once :func:`main` has returned, what a normal exit runs that
     matters is run here: the ``atexit`` handlers (``logging.shutdown``, ``weakref.finalize``
     hooks such as a ``TemporaryDirectory``'s cleanup, multiprocessing's), then stdout and
-    stderr are flushed, then ``os._exit``. While another non-daemon thread still runs, or when
-    :func:`main` raises (``SystemExit`` of ``--help`` or of a usage error), the interpreter
-    exits the normal way. Tests call :func:`main`, which returns.
+    stderr are flushed, then ``os._exit``. While another non-daemon thread still runs, under a
+    tracer or profiler (``python -m cProfile -m drip_cert.cli``), or when :func:`main` raises
+    (``SystemExit`` of ``--help`` or of a usage error), the interpreter exits the normal way.
+    Tests call :func:`main`, which returns.
     """
     code = main()
+    if sys.gettrace() is not None or sys.getprofile() is not None:
+        return code  # a debugger, tracer or profiler (cProfile) writes its results at the exit
     if any(
         t.is_alive() and not t.daemon
         for t in threading.enumerate()

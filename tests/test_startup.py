@@ -113,3 +113,21 @@ def test_a_thread_still_running_is_joined_before_the_exit(tmp_path):
     out = _console("certify", str(tmp_path / "missing.toml"), before=before)
     assert out.returncode == 2, out.stderr
     assert "THREAD" in out.stderr.splitlines()
+
+
+def test_a_profiled_command_still_writes_its_profile(tmp_path):
+    """Under cProfile (a profiler writes its results at the normal exit) the command exits the
+    normal way: ``python -m cProfile -o FILE -m drip_cert.cli ...`` leaves FILE."""
+    import pstats
+
+    prof = tmp_path / "cli.prof"
+    out = subprocess.run(
+        [sys.executable, "-m", "cProfile", "-o", str(prof), "-m", "drip_cert.cli", "certify"]
+        + [str(tmp_path / "missing.toml")],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        check=False,
+    )
+    assert "drip-cert: error: " in out.stderr  # cProfile drops the exit status: not checked
+    assert pstats.Stats(str(prof)).total_calls > 0
