@@ -111,6 +111,35 @@ def test_batched_enclosure_contains_the_scalar_one(k):
     assert n_cmp > N_BOXES // 2
 
 
+#: the point enclosure's ends sit within a few roundings of the float value (8 ulps of libm
+#: widening per elementary function, one ulp per outward-rounded operation, ~10 of each here)
+POINT_REL = 1e-12
+
+
+@pytest.mark.parametrize("k", range(len(EXPRS)))
+def test_point_enclosures_hold_the_exact_value_tightly(k):
+    """``at_points`` (the lower values of the batched sup search): lo <= exact value <= hi in
+    Arb, and both ends within POINT_REL of it (a lower value that is a bound, not a guess)."""
+    expr = EXPRS[k]
+    rng = np.random.default_rng(200 + k)
+    pts = rng.uniform(-6.0, 6.0, (40, 2))
+    lo, hi = BatchEnclosure(expr, [q, v]).at_points(pts)
+    ctx.prec = 200
+    try:
+        checked = 0
+        for p, a, b in zip(pts, lo, hi):
+            e = _arb_value(expr, p)
+            if np.isnan(a) or not e.is_finite():
+                continue
+            assert arb(a) <= e <= arb(b), (expr, p, a, b, e)
+            scale = max(abs(float(e.mid())), 1e-300)
+            assert b - a <= POINT_REL * scale + 1e-300, (expr, p, a, b)
+            checked += 1
+        assert checked >= 30
+    finally:
+        ctx.prec = 53
+
+
 def test_batched_domain_violations_give_no_information():
     f = compile_batch(sp.log(q) + sp.sqrt(v), [q, v])
     boxes = np.array(

@@ -348,6 +348,14 @@ class BatchEnclosure:
             except UnsupportedExpression:
                 self._grads = None
 
+    def at_points(self, points: np.ndarray) -> Pair:
+        """``(lo, hi)``, each ``(P,)``, enclosing the expression at each point of ``points``
+        ``(P, d)``: the natural extension on the degenerate boxes ``[p, p]`` (NaN: no
+        information, e.g. outside the domain)."""
+        pts = np.asarray(points, dtype=float)
+        with np.errstate(all="ignore"):
+            return _nan_both(*self._natural(np.stack([pts, pts], axis=-1)))
+
     def __call__(self, boxes: np.ndarray) -> Pair:
         """``(lo, hi)``, each ``(K,)``, for the boxes ``(K, d, 2)`` (NaN: no information)."""
         with np.errstate(all="ignore"):  # inf - inf and the like: NaN, read as no information

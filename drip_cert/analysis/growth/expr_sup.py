@@ -174,9 +174,12 @@ def _expr_sup_batched(
     atol: float,
     max_splits: int,
 ) -> BnbResult:
-    """:func:`expr_sup` with many boxes per enclosure call."""
-    d = len(variables)
-    fn = _first_lambdify(forms, variables, "numpy")
+    """:func:`expr_sup` with many boxes per enclosure call.
+
+    The lower values are the lower ends of the first form's natural interval extension at the
+    sampled points (degenerate boxes): each is ``<= expr(point) <= sup``, a few ulps below the
+    float value, and needs no ``sympy.lambdify`` (whose printers cost a certify ~0.1 CPU-s
+    to import and compile)."""
 
     def upper_many(bs: np.ndarray) -> np.ndarray:
         best = np.full(bs.shape[0], np.inf)
@@ -186,13 +189,7 @@ def _expr_sup_batched(
         return best
 
     def value_many(ps: np.ndarray) -> np.ndarray:
-        assert fn is not None
-        try:
-            with np.errstate(all="ignore"):
-                out = fn(*(ps[:, i] for i in range(d)))
-            return np.broadcast_to(np.asarray(out, dtype=float), (ps.shape[0],))
-        except (ValueError, ZeroDivisionError, OverflowError, TypeError):
-            return np.full(ps.shape[0], np.nan)
+        return encs[0].at_points(ps)[0]
 
     return maximize(
         box,
@@ -204,6 +201,6 @@ def _expr_sup_batched(
         corners=True,
         prefer_deep=True,
         upper_many=upper_many,
-        value_many=None if fn is None else value_many,
+        value_many=value_many,
         batch=BNB_BATCH,
     )
