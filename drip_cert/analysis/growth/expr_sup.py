@@ -4,8 +4,10 @@ The expression comes as several equivalent forms (rewritings by sympy, see
 :mod:`drip_cert.analysis.growth.rewrites`); the upper bound on a box is the smallest of their
 interval enclosures (natural extension intersected with the mean-value form), each rigorous, so
 the smallest is too. The supremum over the box is then bounded by the one branch and bound of
-:mod:`drip_cert.numerics.bnb`, sampling the first form that ``lambdify`` accepts at box centres
-and corners (for stopping only).
+:mod:`drip_cert.numerics.bnb`, sampling the first form at box centres and corners (for
+stopping only): the lower end of its batched natural extension at the point (a lower bound on
+the value there) in the batched search, the first form that ``lambdify`` accepts in the scalar
+one.
 
 When every form has a batched enclosure
 (:class:`~drip_cert.numerics.interval_batch.BatchEnclosure`, numpy over many boxes per call) the
