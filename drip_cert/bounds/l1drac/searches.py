@@ -130,6 +130,7 @@ def condition_probe(eq: str, sides: Callable[[float], tuple[float, float]]) -> P
     tests/test_l1drac_roots.py), and the margin :func:`_relative_margin` of
     :func:`~drip_cert.bounds.l1drac.sides.margin_of`."""
     relation = RELATIONS[eq]
+    atanh, inf, nan = math.atanh, math.inf, math.nan
 
     def probe(x: float) -> tuple[bool, float]:
         lhs, rhs = sides(x)
@@ -142,7 +143,16 @@ def condition_probe(eq: str, sides: Callable[[float], tuple[float, float]]) -> P
         else:  # "<="
             m = rhs - lhs
             ok = lhs <= rhs
-        return ok and m == m, _relative_margin(m, lhs, rhs)  # m == m: not NaN
+        if m != m:  # NaN: never holds (= holds_of), no margin
+            return False, nan
+        # _relative_margin, inlined (the searches' inner loop)
+        if m == inf or m == -inf:
+            return ok, m
+        scale = abs(lhs) + abs(rhs)
+        if not 0.0 < scale < inf:
+            return ok, nan
+        q = m / scale
+        return ok, (atanh(q) if -1.0 < q < 1.0 else q * inf)
 
     return probe
 
