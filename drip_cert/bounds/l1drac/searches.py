@@ -85,8 +85,8 @@ TINY = 1e-200
 
 
 #: A probe of a search: ``x -> (holds, m)``, the float64 verdict of the condition at ``x`` (the
-#: comparison the final re-check makes) and a continuous margin used only to interpolate: finite
-#: with the sign of the verdict's side (>= 0 where it holds, <= 0 where it fails), or NaN.
+#: comparison the final re-check makes) and a continuous margin used only to choose the next
+#: probe: >= 0 where the condition holds with room, <= 0 where it fails (+-inf allowed), or NaN.
 Probe = Callable[[float], tuple[bool, float]]
 
 #: ITP slack n_0 over bisection: :func:`_close` never needs more than n_{1/2} + ITP_N0 probes,
@@ -170,14 +170,14 @@ def _close(
     ``good_hi``: ``hi`` satisfies and ``lo`` fails (an up-set); else the reverse (a down-set).
     ``m_lo``, ``m_hi``: the probe's margins at the ends. In ``u = log x``, each step probes
 
-    1. the secant zero of the margin through the last two probes when it is strictly inside
-       the bracket, else the regula-falsi zero through the two ends, else the midpoint (a NaN or
-       flat margin);
+    1. the secant zero of the margin through the last two probes when it lies in the bracket,
+       else the regula-falsi zero through the two ends, else the midpoint (NaN, infinite or
+       equal margins); a margin whose sign disagrees with its verdict counts as 0;
     2. projected into the ball around the midpoint of radius
        ``r_j = eps 2^(n_max - j) - w / 2`` (the ITP method, Oliveira & Takahashi, ACM TOMS 47
-       (1), 2020; ``2 eps = log1p(ROOT_RTOL)``, ``n_max = n_{1/2} + ITP_N0``), which bounds the
-       width after step j by ``2 eps 2^(n_max - j - 1)``: at most ``n_max`` probes whatever the
-       margins are;
+       (1), 2020; ``2 eps = ITP_WIDTH log1p(ROOT_RTOL)``, ``n_max = n_{1/2} + ITP_N0``), which
+       bounds the width after step j by ``2 eps 2^(n_max - j - 1)``: at most ``n_max`` probes
+       whatever the margins are;
     3. kept ``TOL_STEP * 2 eps`` away from both ends (the midpoint once the bracket is narrower
        than twice that), so that a root estimated at an end is closed by the next probe.
 
