@@ -61,8 +61,8 @@ def test_search_of_rho_a_is_the_same_number(seed, monkeypatch):
     with monkeypatch.context() as m:
         m.setattr(
             searches,
-            "holds_24_oracle",
-            lambda c, tc, s, w, r: lambda y: holds_24_at(c, tc, s, w, r, y),
+            "sides_24_oracle",
+            lambda c, tc, s, w, r: lambda y: sides_24_at(c, tc, s, w, r, y),
         )
         generic = [
             searches.min_rho_a(c, tc, p, kw * lam, 1.5, kl * lam, kt / lam, ("16b", "21b", "24"))
@@ -85,6 +85,7 @@ def test_oracles_are_the_results_holds(seed):
         holds_24_oracle,
         holds_of,
         holds_r_oracle,
+        sides_r_oracle,
     )
     from drip_cert.bounds.l1drac.sides import sides_16a, sides_16b, sides_21a, sides_21b
 
@@ -99,6 +100,8 @@ def test_oracles_are_the_results_holds(seed):
         oracle = holds_24_oracle(c, tc, s, w, 1.5)
         o16a, o21a = holds_r_oracle(c, rc, w, "16a"), holds_r_oracle(c, rc, w, "21a")
         assert o16a.__name__ == "holds_16a" and o21a.__name__ == "holds_21a"  # the float path
+        s16a, s21a = sides_r_oracle(c, rc, w, "16a"), sides_r_oracle(c, rc, w, "21a")
+        assert s16a.__name__ == "sides_16a" and s21a.__name__ == "sides_21a"
         for x in 10.0 ** rng.uniform(-6, 6, N_Y):
             x = float(x)
             assert holds_of("16a", *sides_16a(c, rc, w, x)) == float_16a(c, rc, w, x).holds
@@ -109,12 +112,13 @@ def test_oracles_are_the_results_holds(seed):
             assert oracle(x) == holds_24_at(c, tc, s, w, 1.5, x)
             assert o16a(x) == float_16a(c, rc, w, x).holds
             assert o21a(x) == float_21a(c, rc, w, x).holds
+            assert s16a(x) == sides_16a(c, rc, w, x)  # the searches' floats, bit for bit
+            assert s21a(x) == sides_21a(c, rc, w, x)
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2, 3])
 def test_search_of_rho_r_is_the_same_number(seed, monkeypatch):
     from drip_cert.bounds.l1drac.appendix import reference_constants
-    from drip_cert.bounds.l1drac.conditions import holds_of
     from drip_cert.bounds.l1drac.sides import sides_16a, sides_21a
 
     c = _constants(seed)
@@ -124,11 +128,7 @@ def test_search_of_rho_r_is_the_same_number(seed, monkeypatch):
     found = [searches.min_rho_r(c, rc, w, ("16a", "21a")) for w in omegas]
     side = {"16a": sides_16a, "21a": sides_21a}
     with monkeypatch.context() as m:
-        m.setattr(
-            searches,
-            "holds_r_oracle",
-            lambda c, rc, w, eq: lambda x: holds_of(eq, *side[eq](c, rc, w, x)),
-        )
+        m.setattr(searches, "sides_r_oracle", lambda c, rc, w, eq: lambda x: side[eq](c, rc, w, x))
         generic = [searches.min_rho_r(c, rc, w, ("16a", "21a")) for w in omegas]
     assert found == generic  # bit for bit (None where no rho_r exists)
     assert any(r is not None for r in found)

@@ -388,9 +388,25 @@ def holds_r_oracle(
     operations of :func:`~drip_cert.bounds.l1drac.sides.sides_16a` /
     :func:`~drip_cert.bounds.l1drac.sides.sides_21a` in their order (the same booleans; tested
     in tests/test_l1drac_oracle.py). Float backend only; otherwise the generic form."""
+    return _oracle_r(c, rc, omega, eq, True)
+
+
+def sides_r_oracle(
+    c: L1Constants, rc: RefConstants, omega: float, eq: str
+) -> Callable[[float], tuple[float, float]]:
+    """``x -> sides_<eq>(c, rc, omega, x)`` for ``eq`` in ``("16a", "21a")``, the same two
+    floats bit for bit, faster (the floats :func:`holds_r_oracle` compares): what the search
+    over ``rho_r`` evaluates, to compare them and to interpolate on their margin."""
+    return _oracle_r(c, rc, omega, eq, False)
+
+
+def _oracle_r(c: L1Constants, rc: RefConstants, omega: float, eq: str, compare: bool) -> Any:
+    """:func:`holds_r_oracle` (``compare``) or :func:`sides_r_oracle`."""
     side = {"16a": sides_16a, "21a": sides_21a}[eq]
     if not all(isinstance(o.num, FloatOps) for o in (c, rc)):
-        return lambda x: holds_of(eq, *side(c, rc, omega, x))
+        if compare:
+            return lambda x: holds_of(eq, *side(c, rc, omega, x))
+        return lambda x: side(c, rc, omega, x)
     sq, isnan = math.sqrt, math.isnan
     om = float(omega)
     lam, D = rc.lam, rc.Delta_star
@@ -406,14 +422,17 @@ def holds_r_oracle(
     alpha2, eps_r = c.alpha**2, c.eps_r
     if eq == "16a":
 
-        def holds_16a(x: float) -> bool:
+        def holds_16a(x: float) -> Any:
             x = float(x)
             r = x + D
             sr = sq(r)
             lhs = one_m_kr * x**2
             rhs = alpha2 + (a0 + a1 * sr + a2 * r + a3 * x + a4 * (r * sr)) + eps_r
-            return lhs >= rhs and not isnan(lhs - rhs)
+            if compare:
+                return lhs >= rhs and not isnan(lhs - rhs)
+            return lhs, rhs
 
+        holds_16a.__name__ = "holds_16a" if compare else "sides_16a"
         return holds_16a
     # (22) Theta_r, divided by |2 lambda - omega| (c's lambda, as sides_21a)
     sw = sq(om)
@@ -426,15 +445,18 @@ def holds_r_oracle(
     oast_2, oast_3 = rc.oast_2, rc.oast_3
     gap = abs(2.0 * c.lam - om)
 
-    def holds_21a(x: float) -> bool:
+    def holds_21a(x: float) -> Any:
         x = float(x)
         r = x + D
         sr = sq(r)
         th = b0 + b1 * sr + b2 * r + b3 * x + (b4 * r + b5 * x) * sr + (oast_2 * r + oast_3 * x) * r
         lhs = th / gap
         rhs = one_m_kr * x**2 - alpha2 - (a0 + a1 * sr + a2 * r + a3 * x + a4 * (r * sr))
-        return lhs < rhs and not isnan(rhs - lhs)
+        if compare:
+            return lhs < rhs and not isnan(rhs - lhs)
+        return lhs, rhs
 
+    holds_21a.__name__ = "holds_21a" if compare else "sides_21a"
     return holds_21a
 
 

@@ -5,14 +5,34 @@ Control -- Global Results", arXiv:2509.04619 (2025-09-04), Sec. 3.2 (conditions 
 
 How and to what tolerance
 -------------------------
-Each unknown is found by bisection in log space on a bracket ``[lo, hi]`` whose ``hi`` end always
-satisfies the condition and whose ``lo`` end never does; the search stops when
-``hi / lo - 1 <= ROOT_RTOL`` and returns ``hi`` (``lo`` for the largest Ts). The returned point was
-itself evaluated with the same function that the final re-check uses, so the certificate never
-rests on a point that fails its own re-check; it is minimal (maximal for Ts) to a relative
-``ROOT_RTOL``. Why bisection is correct: see :func:`smallest_rho_r`, :func:`smallest_rho_a` and
-:func:`largest_Ts`, which prove that each feasible set is an interval reaching to infinity (to
-zero for Ts).
+Each unknown is the end of a feasible set that is an interval reaching to infinity (to zero for
+Ts): :func:`smallest_rho_r`, :func:`smallest_rho_a` and :func:`largest_Ts` prove it. A search
+asks a *probe* ``x -> (holds, margin)``: ``holds`` is the float64 verdict of the condition, the
+same comparison of the same two float sides that the final re-check makes (NaN never holds), and
+``margin`` a continuous measure of it, ``atanh(m / (|lhs| + |rhs|))`` with ``m`` the signed
+margin of :func:`~drip_cert.bounds.l1drac.sides.margin_of` (>= 0 where the condition holds; for
+positive sides ``+-log(lhs / rhs) / 2``, close to linear in ``log x``), used only to choose where
+to probe next.
+
+1. Bracketing (:func:`_bracket`): from the search's lower end (rho) or from ``T_cap`` (Ts), a
+   first step of a factor 2 (rho) or 1/10 (Ts), then steps in ``log x`` from the secant
+   extrapolation of the margin (times 1.1), at most doubling (galloping), until a probe holds;
+   None when the cap (RHO_CAP; TINY for Ts) itself fails.
+2. Closing (:func:`_close`): on ``[lo, hi]`` with one end satisfying and the other not, the
+   secant zero of the margin through the last two probes in ``log x`` (else regula falsi through
+   the ends, else the midpoint), projected as in the ITP method so that a bracket never needs
+   more than bisection's count + ITP_N0 = 6 probes, and kept ``0.99 log1p(ROOT_RTOL)`` inside
+   the ends so that a root estimated at an end is closed by the next probe. Every probed point
+   replaces the end on its *verdict's* side, whatever its margin: the bracket invariant is that
+   of a bisection.
+
+The search stops when ``hi / lo - 1 <= ROOT_RTOL`` (or no float lies between the ends) and
+returns the satisfying end: ``hi`` for rho (``lo`` for the largest Ts). That point was itself
+probed, with the verdict the final re-check uses, so the certificate never rests on a point that
+fails its own re-check; a point within a relative ROOT_RTOL below it (above it for Ts) fails, so
+it is minimal (maximal) to ``ROOT_RTOL``, as with the bisection this replaced (issue 26), which
+needed ~45 probes per root where this needs ~7 on the gallery examples (smooth margins converge
+superlinearly; steps, NaN or misleading margins fall back to bisection's steps).
 
 Public surface
 --------------
@@ -41,12 +61,12 @@ from drip_cert.bounds.l1drac.conditions import (
     check_omega,
     check_p,
     check_Ts,
-    holds_24_oracle,
-    holds_of,
-    holds_r_oracle,
+    sides_24_oracle,
+    sides_r_oracle,
 )
 from drip_cert.bounds.l1drac.constants import L1Constants
 from drip_cert.bounds.l1drac.sides import (
+    RELATIONS,
     budget_24,
     sides_16b,
     sides_21b,
@@ -64,29 +84,234 @@ RHO_CAP = 1e60
 TINY = 1e-200
 
 
-def _smallest(ok: Callable[[float], bool], lo: float) -> float | None:
-    """Smallest x >= lo with ok(x), for an up-set {ok} = [x*, inf) or (x*, inf); None if > cap.
+#: A probe of a search: ``x -> (holds, m)``, the float64 verdict of the condition at ``x`` (the
+#: comparison the final re-check makes) and a continuous margin used only to choose the next
+#: probe: >= 0 where the condition holds with room, <= 0 where it fails (+-inf allowed), or NaN.
+Probe = Callable[[float], tuple[bool, float]]
 
-    Doubling from ``lo`` brackets the root, then bisection in log space keeps ``ok(hi)`` True and
-    ``ok(lo)`` False until ``hi / lo - 1 <= ROOT_RTOL``; returns ``hi``.
+#: ITP slack n_0 over bisection: :func:`_close` never needs more than n_{1/2} + ITP_N0 probes,
+#: where n_{1/2} = ceil(log2(w / (ITP_WIDTH log1p(ROOT_RTOL)))) is the count of plain bisection
+#: on a bracket of width w in log x (a factor 2: n_{1/2} = 40).
+ITP_N0 = 6
+#: The ITP target width 2 eps in log x, as a fraction of log1p(ROOT_RTOL): a hair below it, so
+#: that a bracket of that width in u = log(x / lo) passes the float test hi / lo - 1 <= ROOT_RTOL
+#: despite the rounding of x = lo e^u.
+ITP_WIDTH = 0.999
+#: Factor on the secant's extrapolated step while bracketing an up-set: a little beyond the
+#: estimated root, so that the next probe usually holds and brackets it tightly.
+OVERSHOOT = 1.1
+#: Smallest factor hi / lo of a bracketing step (an extrapolation closer than this is moved out).
+MIN_FACTOR = 1.01
+#: Distance, as a fraction of the target width log1p(ROOT_RTOL), from an end of the bracket inside
+#: which no point is probed: a point estimated there is moved to this distance, so that when the
+#: root is between it and the end the next bracket is within the tolerance (<1: float slack).
+TOL_STEP = 0.99
+
+
+def _relative_margin(m: float, lhs: float, rhs: float) -> float:
+    """``atanh(m / (|lhs| + |rhs|))``: the margin on the scale of its terms, equal to
+    ``log(lhs / rhs) / 2`` (its sign as ``m``) when both sides are positive, hence close to
+    linear in log x where one power of x dominates each side (what the searches interpolate).
+    +-inf where one side vanishes, has the other sign or is infinite (an overflow: ``m`` is then
+    +-inf, a margin of definite sign); NaN when ``m`` is NaN or both sides are 0."""
+    if math.isinf(m):
+        return m
+    scale = abs(lhs) + abs(rhs)
+    if not 0.0 < scale < math.inf:
+        return math.nan
+    q = m / scale
+    return math.atanh(q) if -1.0 < q < 1.0 else q * math.inf
+
+
+def condition_probe(eq: str, sides: Callable[[float], tuple[float, float]]) -> Probe:
+    """The probe of condition ``eq`` on its two float64 sides ``x -> (lhs, rhs)``: the verdict
+    is ``holds_of(eq, lhs, rhs)`` (:func:`~drip_cert.bounds.l1drac.conditions.holds_of`, the
+    ``holds`` of the final re-check: NaN never holds), written out for speed (the same booleans:
+    tests/test_l1drac_roots.py), and the margin :func:`_relative_margin` of
+    :func:`~drip_cert.bounds.l1drac.sides.margin_of`."""
+    relation = RELATIONS[eq]
+    atanh, inf, nan = math.atanh, math.inf, math.nan
+
+    def probe(x: float) -> tuple[bool, float]:
+        lhs, rhs = sides(x)
+        if relation == ">=":
+            m = lhs - rhs
+            ok = lhs >= rhs
+        elif relation == "<":
+            m = rhs - lhs
+            ok = lhs < rhs
+        else:  # "<="
+            m = rhs - lhs
+            ok = lhs <= rhs
+        if m != m:  # NaN: never holds (= holds_of), no margin
+            return False, nan
+        # _relative_margin, inlined (the searches' inner loop)
+        if m == inf or m == -inf:
+            return ok, m
+        scale = abs(lhs) + abs(rhs)
+        if not 0.0 < scale < inf:
+            return ok, nan
+        q = m / scale
+        return ok, (atanh(q) if -1.0 < q < 1.0 else q * inf)
+
+    return probe
+
+
+def _mid(lo: float, hi: float) -> float:
+    """The geometric midpoint of ``0 <= lo < hi`` without underflow of ``lo * hi``."""
+    return math.sqrt(lo) * math.sqrt(hi)
+
+
+def _close(
+    probe: Probe, lo: float, hi: float, m_lo: float, m_hi: float, good_hi: bool
+) -> tuple[float, float]:
+    """Shrink a bracket ``0 < lo < hi`` with one satisfying end until ``hi / lo - 1 <= ROOT_RTOL``.
+
+    ``good_hi``: ``hi`` satisfies and ``lo`` fails (an up-set); else the reverse (a down-set).
+    ``m_lo``, ``m_hi``: the probe's margins at the ends. In ``u = log x``, each step probes
+
+    1. the secant zero of the margin through the last two probes when it lies in the bracket,
+       else the regula-falsi zero through the two ends, else the midpoint (NaN, infinite or
+       equal margins); a margin whose sign disagrees with its verdict counts as 0;
+    2. projected into the ball around the midpoint of radius
+       ``r_j = eps 2^(n_max - j) - w / 2`` (the ITP method, Oliveira & Takahashi, ACM TOMS 47
+       (1), 2020; ``2 eps = ITP_WIDTH log1p(ROOT_RTOL)``, ``n_max = n_{1/2} + ITP_N0``), which
+       bounds the width after step j by ``2 eps 2^(n_max - j - 1)``: at most ``n_max`` probes
+       whatever the margins are;
+    3. kept ``TOL_STEP * 2 eps`` away from both ends (the midpoint once the bracket is narrower
+       than twice that), so that a root estimated at an end is closed by the next probe.
+
+    Every point is probed and replaces the end on its verdict's side, so the invariant (``hi``
+    satisfies, ``lo`` fails, or the reverse) holds throughout, whatever the margins are; the
+    margins only choose where to probe. Stops early when no float lies strictly between the ends
+    (adjacent floats). Returns ``(lo, hi)``.
     """
-    if ok(lo):
-        return lo
-    hi = max(2.0 * lo, lo + TINY)
-    while not ok(hi):
-        lo = hi
-        hi *= 2.0
-        if hi > RHO_CAP:
-            return None
+    if not lo > 0.0:  # a bracket [0, hi]: no geometric midpoint lies inside (as bisection)
+        return lo, hi
+    m_lo, m_hi = _signed(not good_hi, m_lo), _signed(good_hi, m_hi)
+    base = lo  # u = log(x / base): full relative precision at any scale of x
+    eps2 = ITP_WIDTH * math.log1p(ROOT_RTOL)
+    step = TOL_STEP * eps2
+    ua, ub = 0.0, math.log(hi / lo)  # u of lo and hi
+    n_max = max(math.ceil(math.log2(ub / eps2)), 0) + ITP_N0
+    u0, z0, u1, z1 = ua, m_lo, ub, m_hi  # the last two probes (u, margin)
+    j = 0
     while hi / lo - 1.0 > ROOT_RTOL:
-        mid = math.sqrt(lo * hi)
-        if not lo < mid < hi:  # adjacent floats
-            break
-        if ok(mid):
-            hi = mid
+        w = ub - ua
+        half = ua + 0.5 * w
+        u = _zero(u0, z0, u1, z1, ua, ub)
+        if u is None:
+            u = _zero(ua, m_lo, ub, m_hi, ua, ub)
+        if u is None:
+            u = half
+        r = max(0.5 * eps2 * 2.0 ** (n_max - j) - 0.5 * w, 0.0)
+        u = min(max(u, half - r), half + r)
+        u = min(max(u, ua + step), ub - step) if w > 2.0 * step else half
+        x = base * math.exp(u)
+        if not lo < x < hi:
+            x = _mid(lo, hi)
+            u = half
+            if not lo < x < hi:  # adjacent floats
+                break
+        ok, m = probe(x)
+        m = _signed(ok, m)
+        if ok == good_hi:
+            hi, m_hi, ub = x, m, u
         else:
-            lo = mid
-    return hi
+            lo, m_lo, ua = x, m, u
+        u0, z0, u1, z1 = u1, z1, u, m
+        j += 1
+    return lo, hi
+
+
+def _signed(ok: bool, m: float) -> float:
+    """The margin ``m`` given the sign of the verdict ``ok`` (>= 0 where it holds, <= 0 where it
+    fails): 0 where they disagree (a margin and a comparison rounded differently), NaN kept."""
+    return max(m, 0.0) if ok else min(m, 0.0)
+
+
+def _zero(u0: float, z0: float, u1: float, z1: float, a: float, b: float) -> float | None:
+    """The zero of the line through ``(u0, z0)``, ``(u1, z1)`` when it lies in ``[a, b]`` (at an
+    end: the root is there to the margin's rounding); None otherwise (NaN or infinite margins,
+    equal margins)."""
+    den = z1 - z0
+    if not (den != 0.0 and math.isfinite(den) and math.isfinite(z1)):
+        return None
+    u = u1 - z1 * ((u1 - u0) / den)
+    return u if a <= u <= b else None
+
+
+def _bracket(
+    probe: Probe, x: float, m_x: float, first: float, limit: float
+) -> tuple[float, float, float, float] | None:
+    """From a failing ``x > 0`` (margin ``m_x``), probe towards ``limit`` until a probe holds:
+    ``(fail, m_fail, good, m_good)``, the last failing and the first satisfying probe; None when
+    ``limit`` itself fails (the set being an up-set towards ``limit``: nowhere before it).
+
+    The first probe is ``first`` (``2 x`` up, ``x / 10`` down: the bisection's first step
+    ``s0``); each next step in log x is the secant extrapolation of the margin through the last
+    two probes times ``OVERSHOOT`` (at least ``log MIN_FACTOR``), at most twice the last step
+    (galloping: without a usable margin the exponent doubles per probe, about log2 log2 of the
+    distance to the root in probes instead of log2 of it), clamped at ``limit``. A failing probe
+    counts as failing whatever its margin, as in a bisection. A NaN margin after a finite one may
+    be an overflow beyond the root, where the float oracle no longer follows the monotone set:
+    from then on the search steps by ``s0`` from the last finite point, so that it probes no point
+    the search of a bisection would not have probed. (NaN from the start -- the condition cannot
+    be evaluated anywhere, e.g. e^(omega Ts) overflowed in the constants of (24) -- gallops to
+    ``limit``: ~10 probes, not ~200.)
+    """
+    up = limit > x
+    s0 = abs(math.log(first / x))
+    finite = not math.isnan(m_x)  # a finite (or +-inf) margin was seen
+    stepping = False  # steps of s0 only (after a NaN margin)
+    nxt = first
+    while True:
+        ok, m = probe(nxt)
+        if ok:
+            return x, m_x, nxt, m
+        if nxt == limit:
+            return None
+        d = abs(math.log(nxt / x))
+        if math.isnan(m):
+            if finite and not stepping:  # retreat to the last finite point, then step by s0
+                stepping = True
+                if d > s0 * (1.0 + 1e-9):
+                    nxt = min(x * math.exp(s0), limit) if up else max(x * math.exp(-s0), limit)
+                    continue
+        else:
+            finite = True
+        step = s0 if stepping else 2.0 * d
+        den = m - m_x  # > 0: the margin grows towards the root
+        if not stepping and den > 0.0 and math.isfinite(den) and math.isfinite(m):
+            est = -m * (d / den)  # the secant's zero, beyond nxt, in log x
+            if est > 0.0:
+                step = min(max(OVERSHOOT * est, math.log(MIN_FACTOR)), step)
+        x, m_x = nxt, m
+        nxt = min(x * math.exp(step), limit) if up else max(x * math.exp(-step), limit)
+
+
+def _smallest(probe: Probe, lo: float) -> float | None:
+    """Smallest x >= lo where the probe holds, for an up-set [x*, inf) or (x*, inf); None when
+    it fails at RHO_CAP (then, the set being an up-set, everywhere below).
+
+    :func:`_bracket` from ``lo`` upwards (first probe ``2 lo``), then :func:`_close` keeps the
+    probe True at ``hi`` and False at ``lo`` until ``hi / lo - 1 <= ROOT_RTOL``; returns ``hi``.
+    """
+    ok, m_lo = probe(lo)
+    if ok:
+        return lo
+    if not lo > 0.0:  # lo = 0: TINY is the next point, as in the bisection's doubling
+        lo = TINY
+        ok, m_lo = probe(lo)
+        if ok:
+            return lo
+    if lo >= RHO_CAP:
+        return None
+    br = _bracket(probe, lo, m_lo, min(2.0 * lo, RHO_CAP), RHO_CAP)
+    if br is None:
+        return None
+    lo, m_lo, hi, m_hi = br
+    return _close(probe, lo, hi, m_lo, m_hi, True)[1]
 
 
 def smallest_rho_r(
@@ -94,7 +319,7 @@ def smallest_rho_r(
 ) -> float | None:
     """The smallest rho_r satisfying (16a) and/or (21a) at (p, omega); None if none does.
 
-    Monotonicity (why bisection finds *the* smallest). Write ``x = rho_r > 0``,
+    Monotonicity (why the search finds *the* smallest). Write ``x = rho_r > 0``,
     ``k = Delta_g_perp Delta_mu_perp / lambda in (0, 1)`` (Assumption 7), ``D = Delta_star >= 0``.
     (16a) holds iff ``psi(x) = (1 - k) - (alpha^2 + eps_r + Gamma_r(x)) / x^2 >= 0``. By (18b),
     ``Gamma_r(x)`` is a non-negative combination of ``1, (x+D)^{1/2}, (x+D), x, (x+D)^{3/2}``, and
@@ -123,14 +348,14 @@ def min_rho_r(
     out = 0.0
     if "16a" in which:
         lo = math.sqrt((c.alpha**2 + c.eps_r) / (1.0 - c.k_r))
-        r = _smallest(holds_r_oracle(c, rc, omega, "16a"), lo)
+        r = _smallest(condition_probe("16a", sides_r_oracle(c, rc, omega, "16a")), lo)
         if r is None:
             return None
         out = max(out, r)
     if "21a" in which:
         lo = max(c.alpha / math.sqrt(1.0 - c.k_r), TINY)
         lo = max(lo, out)  # the joint set is an up-set: start at the (16a) root when known
-        r = _smallest(holds_r_oracle(c, rc, omega, "21a"), lo)
+        r = _smallest(condition_probe("21a", sides_r_oracle(c, rc, omega, "21a")), lo)
         if r is None:
             return None
         out = max(out, r)
@@ -191,19 +416,19 @@ def min_rho_a(
     out = TINY if start is None else start
     if "16b" in which:
         lo = math.sqrt(c.eps_a / (1.0 - c.k_a))
-        r = _smallest(lambda y: holds_of("16b", *sides_16b(c, tc, omega, y)), lo)
+        r = _smallest(condition_probe("16b", lambda y: sides_16b(c, tc, omega, y)), lo)
         if r is None:
             return None
         out = max(out, r)
     if "21b" in which:
-        r = _smallest(lambda y: holds_of("21b", *sides_21b(c, tc, omega, rho_r, y)), out)
+        r = _smallest(condition_probe("21b", lambda y: sides_21b(c, tc, omega, rho_r, y)), out)
         if r is None:
             return None
         out = max(out, r)
     if "24" in which and Ts is not None and lambda_s is not None:
         # the sampling constants do not depend on rho_a: computed once for the whole search
         s = sampling_constants(c, p, omega, Ts, lambda_s)
-        r = _smallest(holds_24_oracle(c, tc, s, omega, rho_r), out)
+        r = _smallest(condition_probe("24", sides_24_oracle(c, tc, s, omega, rho_r)), out)
         if r is None:
             return None
         out = max(out, r)
@@ -229,14 +454,15 @@ def largest_Ts(
     ``e^{(omega - lambda_s) Ts}`` increases);
     gamma'_2 (both arguments of its max are ``1 - (decreasing)`` or ``(increasing) - 1`` around
     the value 1 at Ts = 0); gamma'_1 and the square roots of these. The right side does not
-    depend on Ts. So the feasible set of the envelope is an interval ``(0, T*]`` and bisection
+    depend on Ts. So the feasible set of the envelope is an interval ``(0, T*]`` and the search
     finds T*. Because the envelope bounds the paper's left side from above, (24) itself holds at
     the returned Ts (re-checked in :func:`~drip_cert.bounds.l1drac.designer.design`); the true
     largest Ts can be larger by a relative ``O(lambda_s Ts)``, negligible in the regime (24)
     forces (Ts << 1/lambda_s).
 
-    The bracket starts at ``T_cap = min(1e3, 700 / max(omega, lambda_s, 2 lambda))`` (returned
-    as is when (24) holds there) and shrinks by 10 until feasible, down to 1e-200.
+    The search starts at ``T_cap = min(1e3, 700 / max(omega, lambda_s, 2 lambda))`` (returned
+    as is when (24) holds there) and brackets downwards (:func:`_bracket`, first step 1/10) down
+    to 1e-200.
     """
     p = check_p(c, p)
     check_omega(c, omega)
@@ -262,26 +488,19 @@ def max_Ts(
         return None
     xi1 = rho_a + rho_r + c.Delta_star
 
-    def env_ok(T: float) -> bool:
+    def env_probe(T: float) -> tuple[bool, float]:
         s = sampling_constants(c, p, omega, T, lambda_s, envelope=True)
-        return upsilon_sum(xi1, rho_a, s) <= budget
+        lhs = upsilon_sum(xi1, rho_a, s)
+        return lhs <= budget, _relative_margin(budget - lhs, lhs, budget)  # NaN: False
 
     t_cap = min(1e3, EXP_ARG_MAX / max(omega, lambda_s, 2.0 * c.lam))
-    if env_ok(t_cap):
+    ok, m_hi = env_probe(t_cap)
+    if ok:
         return t_cap
-    hi = t_cap
-    lo = t_cap / 10.0
-    while not env_ok(lo):
-        hi = lo
-        lo /= 10.0
-        if lo < TINY:
-            return None
-    while hi / lo - 1.0 > ROOT_RTOL:
-        mid = math.sqrt(lo * hi)
-        if not lo < mid < hi:
-            break
-        if env_ok(mid):
-            lo = mid
-        else:
-            hi = mid
-    return lo
+    if t_cap / 10.0 < TINY:
+        return None
+    br = _bracket(env_probe, t_cap, m_hi, t_cap / 10.0, TINY)
+    if br is None:
+        return None
+    hi, m_hi, lo, m_lo = br
+    return _close(env_probe, lo, hi, m_lo, m_hi, False)[0]

@@ -278,11 +278,14 @@ def solve(c: L1Constants, req: DesignRequest) -> L1Design:
             return _point(c, rc, tc, req, omega, ls, find_Ts=True), ls
 
         Ts_given = req.Ts  # not None here (the branch above returned)
+        # the points of this search by lambda_s: the design at the chosen one is not searched
+        # again (with Ts given, _point's find_Ts changes nothing)
+        seen: dict[float, _Point] = {}
 
         def rho_a_of(ls: float) -> float:
             if max(omega, ls) * Ts_given > EXP_ARG_MAX:
                 return math.inf
-            pt = _point(c, rc, tc, req, omega, ls, find_Ts=False)
+            pt = seen[ls] = _point(c, rc, tc, req, omega, ls, find_Ts=False)
             return math.inf if pt.rho_a is None else pt.rho_a
 
         ls, v = _log_search(rho_a_of, ls_bounds[0], ls_bounds[1], None, n_ls)
@@ -294,6 +297,8 @@ def solve(c: L1Constants, req: DesignRequest) -> L1Design:
                 f"no lambda_s in [{ls_bounds[0]:.6g}, {ls_bounds[1]:.6g}] gives a design at "
                 f"omega = {omega:.6g}, T_s = {Ts_given:.6g} s",
             ), ls
+        if ls in seen:
+            return seen[ls], ls
         return _point(c, rc, tc, req, omega, ls, find_Ts=True), ls
 
     if req.omega is not None:
@@ -486,13 +491,17 @@ def params_at_Ts(
     )
     w_lo, w_hi = req.omega_bounds or (_OMEGA_BOUNDS_REL[0] * lam, _OMEGA_BOUNDS_REL[1] * lam)
 
+    seen: dict[tuple[float, float], float] = {}  # each (omega, lambda_s) searched once
+
     def rho(w: float, ls: float) -> float:
         if w == 2.0 * lam or max(w, ls) * Ts > EXP_ARG_MAX:
             return math.inf
-        pt = _point(c, rc, tc, at, w, ls, find_Ts=False)
-        if pt.rho_r is None or pt.rho_a is None:
-            return math.inf
-        return pt.rho_r + pt.rho_a
+        if (w, ls) not in seen:
+            pt = _point(c, rc, tc, at, w, ls, find_Ts=False)
+            seen[w, ls] = (
+                pt.rho_r + pt.rho_a if pt.rho_r is not None and pt.rho_a is not None else math.inf
+            )
+        return seen[w, ls]
 
     ls = req.lambda_s if req.lambda_s is not None else math.sqrt(ls_lo * ls_hi)
     omega = req.omega if req.omega is not None else math.sqrt(w_lo * w_hi)
