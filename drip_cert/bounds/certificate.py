@@ -656,7 +656,11 @@ def certify(
     under ``coordinates.alternatives``. The metric candidates are finished best-first, and a
     candidate whose L1-DRAC design could not make it the choice (a lower bound on its order
     computed before the design, :func:`_finish_candidates`) is not designed: it is listed with
-    verdict ``"skipped"`` and the bound that ruled it out.
+    verdict ``"skipped"`` and the bound that ruled it out. When the expert's rate fails in
+    ``x`` (DRIP-A2 fails there, so ``x``'s verdict is ``not_certified`` whatever its other
+    parts give), ``x`` is finished only if no candidate in ``z`` is better than that; otherwise
+    its summary says it was not finished (its constants, TaSIL and L1-DRAC parts are not
+    computed, ``failing`` counts DRIP-A2 alone).
     ``"lmi"`` always uses the metric when one is found, a given matrix ``P`` uses that metric,
     ``"euclidean"`` never changes coordinates.
     """
@@ -673,15 +677,17 @@ def certify(
         cert = _certify_in_metric(spec, change, demonstrations, stage)
         stage.done()
         return cert
-    cert_x = _certify_in(spec, demonstrations, stage)
-    metric = cert_x.contraction_expert.metric
-    eu = cert_x.contraction_expert.euclidean
-    if opts.coordinates == "euclidean" or metric is None:
+    stage("contraction rate of the expert closed loop")
+    ce_x = analyse_contraction(spec.system, "expert", opts)
+    metric, eu = ce_x.metric, ce_x.euclidean
+    if (
+        opts.coordinates == "euclidean"
+        or metric is None
+        or (opts.coordinates == "auto" and eu.holds and eu.rate >= metric.metric_rate)
+    ):
+        cert = _certify_in(spec, demonstrations, stage, expert=ce_x)
         stage.done()
-        return cert_x
-    if opts.coordinates == "auto" and eu.holds and eu.rate >= metric.metric_rate:
-        stage.done()
-        return cert_x
+        return cert
     # the metric that maximises the rate may have a large cond P, which inflates the radii mapped
     # back to x: also try metrics with cond P capped lower, and choose by the final result
     metrics = [metric]
@@ -698,7 +704,7 @@ def certify(
         from drip_cert.learn.imitation import demonstration_set  # jax: keep off the API's path
 
         demonstrations = demonstration_set(spec.system, spec.settings.tasil)
-    prepared = []
+    prepared: list[_Unfinished] = []
     for m in metrics:
         change = coordinates_from_metric(
             m.P,
@@ -707,10 +713,27 @@ def certify(
         )
         stage(f"the certificate in z = Theta x (rate {m.metric_rate:.6g}, cond P {m.cond_P:.3g})")
         prepared.append(_prepare_in_metric(spec, change, demonstrations, stage))
-    # z only when strictly better: a tie keeps the user's own coordinates (listed first)
-    head = [] if opts.coordinates == "lmi" else [cert_x]
-    in_z = _finish_candidates(head, prepared, stage)
+    # x, lazily: when the expert's rate fails in x, x's verdict is not_certified whatever else
+    # it holds, and once a candidate in z is better than that, x's other parts are not computed
+    a2_x = _expert_rate_check(spec.system, opts, ce_x)
+    x_low = (_VERDICT_ORDER[Verdict.NOT_CERTIFIED], 1, 0.0)  # x's key is >= this when a2_x fails
+    cert_x: Certificate | dict[str, Any]
+    head: list[Certificate]
+    if a2_x.holds:
+        cert_x = _certify_in(spec, demonstrations, stage, expert=ce_x)
+        head = [] if opts.coordinates == "lmi" else [cert_x]
+        in_z = _finish_candidates(head, prepared, stage)
+    else:
+        in_z = _finish_candidates([], prepared, stage)
+        keys = [_preference(c) for c in in_z if isinstance(c, Certificate)]
+        if opts.coordinates == "auto" and not any(k < x_low for k in keys):
+            cert_x = _certify_in(spec, demonstrations, stage, expert=ce_x)  # x may be chosen
+            head = [cert_x]
+        else:
+            cert_x = _unfinished_x_summary(ce_x, a2_x, min(keys) if keys else None)
+            head = []
     stage.done()
+    # z only when strictly better: a tie keeps the user's own coordinates (listed first)
     pool = [*head, *(c for c in in_z if isinstance(c, Certificate))]
     chosen = min(pool, key=_preference)
     others = [c for c in [cert_x, *in_z] if c is not chosen]
@@ -870,10 +893,16 @@ def _demonstrations_in_z(demos: DemonstrationSet, change: CoordinateChange) -> D
     return dataclasses.replace(demos, train=train, heldout=one(demos.heldout))
 
 
-def _certify_in(spec: Spec, demonstrations: DemonstrationSet | None, stage: Stages) -> Certificate:
+def _certify_in(
+    spec: Spec,
+    demonstrations: DemonstrationSet | None,
+    stage: Stages,
+    expert: ContractionAnalysis | None = None,
+) -> Certificate:
     """The certificate of ``spec`` in its own coordinates (see :func:`certify`): one call per
-    part, in the order their checks, notes and skipped parts appear in the certificate."""
-    return _finish(_prepare_in(spec, demonstrations, stage))
+    part, in the order their checks, notes and skipped parts appear in the certificate
+    (``expert``: the expert's contraction analysis when already computed)."""
+    return _finish(_prepare_in(spec, demonstrations, stage, expert))
 
 
 @dataclass(frozen=True)
@@ -917,11 +946,16 @@ class _Unfinished:
         return v if self.change is None else self.change.gap_in_x(v)
 
 
-def _prepare_in(spec: Spec, demonstrations: DemonstrationSet | None, stage: Stages) -> _Unfinished:
+def _prepare_in(
+    spec: Spec,
+    demonstrations: DemonstrationSet | None,
+    stage: Stages,
+    expert: ContractionAnalysis | None = None,
+) -> _Unfinished:
     """Every part of the certificate of ``spec`` but the L1-DRAC design (:func:`_finish`)."""
     s, settings = spec.system, spec.settings
     k = _constants_part(s, settings, stage)
-    c = _contraction_part(s, settings.contraction, k, stage)
+    c = _contraction_part(s, settings.contraction, k, stage, expert)
     a = _l1drac_assumptions(s, settings, k, c)
     d = _delta_iss_part(c, k)
     t = _tasil_part(s, settings, demonstrations, k, c, d, stage)
@@ -1011,25 +1045,75 @@ class _ContractionPart:
 
 
 def _contraction_part(
-    s: System, opts: ContractionSettings, k: _Constants, stage: Stages
+    s: System,
+    opts: ContractionSettings,
+    k: _Constants,
+    stage: Stages,
+    expert: ContractionAnalysis | None = None,
 ) -> _ContractionPart:
-    """The expert's rate, a forward-invariant set where it is used, the learned loop's rate."""
-    stage("contraction rate of the expert closed loop")
-    ce = analyse_contraction(s, "expert", opts)
+    """The expert's rate, a forward-invariant set where it is used, the learned loop's rate
+    (``expert``: the expert's analysis when already computed, else computed here)."""
+    if expert is None:
+        stage("contraction rate of the expert closed loop")
+    ce = expert if expert is not None else analyse_contraction(s, "expert", opts)
     r = ce.euclidean
     stage("forward-invariant set (where the expert's rate is used)")
     inv = _invariance(s, r, k.g_box)
     a1 = k.a1 if k.g_box is None else k.a1.with_scope(*_g_scope(k.g_box, inv))
-    a2 = _rate_check("DRIP-A2", r, "expert closed loop", "DRIP Assumption 2")
+    a2 = _expert_a2(s, r, inv)
     lam_ex = r.to_quantity()
     notes: list[str] = []
     cl = None
     if s.learned is not None:
         stage("contraction rate of the learned closed loop")
         cl = _learned_contraction(s, opts, lam_ex, notes)
-    return _ContractionPart(
-        ce, cl, inv, lam_ex, (a1, a2.with_scope(*_expert_scope(r, inv, s.horizon))), tuple(notes)
+    return _ContractionPart(ce, cl, inv, lam_ex, (a1, a2), tuple(notes))
+
+
+def _expert_a2(s: System, r: Any, inv: InvariantSet | None) -> Check:
+    """DRIP Assumption 2 (the expert's rate), scoped to the trajectories it is used for."""
+    a2 = _rate_check("DRIP-A2", r, "expert closed loop", "DRIP Assumption 2")
+    return a2.with_scope(*_expert_scope(r, inv, s.horizon))
+
+
+def _expert_rate_check(s: System, opts: ContractionSettings, ce: ContractionAnalysis) -> Check:
+    """The certificate's DRIP-A2 check in the spec's own coordinates, from the expert's analysis
+    alone (the same check :func:`_contraction_part` makes: its invariant set needs a rate that
+    holds, so a failing check is computed without the constants)."""
+    r = ce.euclidean
+    inv = _invariance(s, r, _g_box(s, opts)) if r.holds else None
+    return _expert_a2(s, r, inv)
+
+
+def _unfinished_x_summary(
+    ce: ContractionAnalysis, a2: Check, best: tuple[int, int, float] | None
+) -> dict[str, Any]:
+    """The summary of the spec's own coordinates when they were not finished: the expert's rate
+    fails there (``a2``), so their verdict is ``not_certified`` whatever the other parts give, and
+    a certificate in z (key ``best``) is better; ``failing`` counts the checks computed."""
+    reason = verdict_of((a2,))[1]
+    best_text = (
+        ""
+        if best is None
+        else f"; the certificate chosen has verdict {_VERDICT_NAMES[best[0]]}, {best[1]} failing "
+        f"checks, rho {best[2]:.6g} in x"
     )
+    return {
+        "coordinates": "x",
+        "verdict": Verdict.NOT_CERTIFIED.value,
+        "expert_rate": json_float(ce.euclidean.rate),
+        "cond_theta": None,
+        "rho_tasil_x": None,
+        "rho_l1_x": None,
+        "factor_to_x": None,
+        "failing": 1,
+        "verdict_reasons": [
+            *reason,
+            "not finished: with the expert's rate failing in x the verdict in x is not_certified "
+            "whatever its other parts give, so its constants, TaSIL and L1-DRAC parts were not "
+            "computed" + best_text,
+        ],
+    }
 
 
 @dataclass(frozen=True)

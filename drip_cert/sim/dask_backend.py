@@ -215,7 +215,14 @@ def run_chunks(
             )
         threads = sum(int(w.get("nthreads", 1)) for w in workers.values())
         t0 = time.perf_counter()
-        client.gather([client.submit(_compile_task, job, workers=[w], pure=False) for w in workers])
+        # one compilation per worker, up front; allow_other_workers: a worker that dies while it
+        # compiles must not leave its task waiting forever for it (a chunk compiles lazily anyway)
+        client.gather(
+            [
+                client.submit(_compile_task, job, workers=[w], allow_other_workers=True, pure=False)
+                for w in workers
+            ]
+        )
         compile_s = time.perf_counter() - t0
         window = max(1, min(WINDOW_PER_THREAD * threads, max_in_flight))
         t1 = time.perf_counter()
