@@ -422,7 +422,7 @@ def test_every_function_local_import_keeps_a_heavy_package_off_an_import_path():
         ("def f():\n    import matplotlib.pyplot as plt  # matplotlib: only for figures\n", ""),
         (
             "def f():\n"
-            "    from drip_cert.analysis.contraction.lmi import (  # clarabel: one function\n"
+            "    from drip_cert.analysis.contraction.lmi import (  # flint: one function\n"
             "        contraction_metric,\n    )\n",
             "",
         ),

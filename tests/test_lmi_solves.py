@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 
+import clarabel
 import numpy as np
 import pytest
 import sympy as sp
@@ -56,13 +57,13 @@ class _CountingSolver:
         return self._inner.solve()
 
 
-_REAL_SOLVER = lmi.clarabel.DefaultSolver
+_REAL_SOLVER = clarabel.DefaultSolver
 
 
 @pytest.fixture
 def counted(monkeypatch):
     _CountingSolver.calls = []
-    monkeypatch.setattr(lmi.clarabel, "DefaultSolver", _CountingSolver)
+    monkeypatch.setattr(clarabel, "DefaultSolver", _CountingSolver)
     return _CountingSolver.calls
 
 

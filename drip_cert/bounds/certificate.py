@@ -28,6 +28,7 @@ from drip_cert.analysis.contraction.invariance import (
     invariant_box,
 )
 from drip_cert.analysis.contraction.learned_loop import best_global_rate, sup_policy_difference
+from drip_cert.analysis.contraction.lmi import DEFAULT_KAPPA, contraction_metric
 from drip_cert.analysis.contraction.mlp_loop import system_mlps
 from drip_cert.analysis.contraction.rate import ContractionResult, contraction_rate
 from drip_cert.analysis.growth.constants import (
@@ -149,11 +150,6 @@ def _metric(
 ) -> Any:
     """The LMI contraction metric of a closed loop on the contraction region (``kappa`` bounds
     ``cond P``; default that of :func:`~drip_cert.analysis.contraction.lmi.contraction_metric`)."""
-    from drip_cert.analysis.contraction.lmi import (  # clarabel: keep off the API's import path
-        DEFAULT_KAPPA,
-        contraction_metric,
-    )
-
     J = s.closed_loop_jacobian(which)
     box = np.array(opts.region if opts.region is not None else s.support, dtype=float)
     depends_t = J.has(s.t)

@@ -36,9 +36,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
-import clarabel
 import numpy as np
-import scipy.sparse as sps
 import sympy as sp
 from flint import arb, arb_mat
 
@@ -308,6 +306,8 @@ class _MetricSDP:
 
     @classmethod
     def build(cls, As: np.ndarray, kappa: float, margin: float) -> _MetricSDP:
+        import scipy.sparse as sps  # scipy: only a metric search needs it (not every certify)
+
         n = As.shape[1]
         index = _svec_index(n)
         E = np.zeros((len(index), n, n))
@@ -332,6 +332,9 @@ class _MetricSDP:
     def solve(self, lam: float) -> np.ndarray | None:
         """``P`` from one Clarabel solve at rate ``lam``; ``None`` unless the status is
         ``Solved`` (``AlmostSolved``, infeasible, or a solver error certify nothing)."""
+        import clarabel  # clarabel: only a metric search solves an SDP (not every certify)
+        import scipy.sparse as sps  # scipy: as clarabel
+
         m, n = self.E.shape[0], self.E.shape[1]
         settings = clarabel.DefaultSettings()
         settings.verbose = False
@@ -386,9 +389,10 @@ def metric_rate_lmi(
     (``mu_{2,P}(A_i) <= -lambda_P`` for all ``i``), and ``log`` summarises the solves.
     Raises :class:`SolverError` when not even the Euclidean start point verifies.
 
-    Each step solves the SDP of :class:`_MetricSDP` (built once) on :func:`_solve_set` of ``As``
-    with Clarabel, re-checks the answer in floats on every matrix, and the final ``P`` is
-    verified in Arb on every matrix. The number of solves is fixed by the bracket and ``tol``.
+    Each step solves the SDP of :class:`_MetricSDP` (built once, at the first step) on
+    :func:`_solve_set` of ``As`` with Clarabel, re-checks the answer in floats on every matrix,
+    and the final ``P`` is verified in Arb on every matrix. The number of solves is fixed by the
+    bracket and ``tol`` (none when the Euclidean rate already meets the spectral abscissa).
     """
     As = np.asarray(As, dtype=float)
     if As.ndim != 3 or As.shape[1] != As.shape[2] or len(As) == 0:
@@ -398,10 +402,12 @@ def metric_rate_lmi(
     n = As.shape[1]
     eye = np.eye(n)
     red, margin = _solve_set(As, kappa)
-    sdp = _MetricSDP.build(red, kappa, margin)
+    sdp: list[_MetricSDP] = []  # built at the first solve (none when the bracket is closed)
 
     def feasible(value: float) -> np.ndarray | None:
-        Pv = sdp.solve(value)
+        if not sdp:
+            sdp.append(_MetricSDP.build(red, kappa, margin))
+        Pv = sdp[0].solve(value)
         if Pv is None:
             return None
         Pv = 0.5 * (Pv + Pv.T)
