@@ -277,3 +277,24 @@ def test_sampled_estimates_flag_infinite_constants_and_undefined_points():
     assert g.likely_infinite and g.n_nonfinite == 1
     assert "not finite (undefined) at 1 of" in g.diagnostics()
     assert math.isfinite(g.value) and g.value > 1e11
+
+
+def test_a_field_is_built_once_and_shared_by_its_constants():
+    """``GrowthField.make`` keeps the field of each (F, states, t, t_range): a growth bound and a
+    Lipschitz bound of one constant share its lazily computed routes. The bounds are those of
+    a field built afresh (the routes are deterministic functions of the field)."""
+    from drip_cert.analysis.growth import field as fld
+
+    x1, x2, t = sp.symbols("x1 x2 t", real=True)
+    F = [sp.sin(x1) * x2 / (1 + x2**2), sp.Rational(1, 3) * sp.tanh(x1 + x2)]
+    a = fld.GrowthField.make(F, (x1, x2), t, (0.0, 1.0))
+    assert fld.GrowthField.make(sp.Matrix(F), [x1, x2], t, (0, 1)) is a
+    assert fld.GrowthField.make(F, (x1, x2), t, (0.0, 2.0)) is not a
+    g1, l1 = growth_bound(F, (x1, x2), None), lipschitz_bound(F, (x1, x2), None)
+    fld._make_kept.cache_clear()
+    fld._diff.cache_clear()
+    fresh = fld.GrowthField._build(F, (x1, x2), None, (0.0, 0.0))
+    assert fresh is not fld.GrowthField.make(F, (x1, x2), None, (0.0, 0.0))
+    fld._make_kept.cache_clear()
+    assert lipschitz_bound(F, (x1, x2), None).value == l1.value
+    assert growth_bound(F, (x1, x2), None).value == g1.value

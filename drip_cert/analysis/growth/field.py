@@ -21,6 +21,7 @@ arb_sqrt_up`).
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Sequence
 
@@ -41,6 +42,15 @@ BNB_MAX_STATES = 3  #: the bounded growth branch and bound runs over at most thi
 _BNB_RADII = (10.0, 100.0, 1000.0)  #: half-widths of its box, tried in turn
 _BNB_SPLITS_LOCAL = 1500  #: its split budget per box
 _INF = math.inf
+_DIFF_KEPT = 1024  #: derivatives kept (one certify asks for a few hundred, many twice)
+_FIELDS_KEPT = 64  #: fields kept (a certify builds ~10 per coordinate system, each twice)
+
+
+@functools.lru_cache(maxsize=_DIFF_KEPT)
+def _diff(e: sp.Expr, x: sp.Symbol) -> sp.Expr:
+    """``d e / d x``, kept: the growth and Lipschitz routes of several constants (a constant and
+    its matched part, each moment) differentiate the same entries again."""
+    return sp.diff(e, x)
 
 
 class GrowthField:
@@ -69,7 +79,10 @@ class GrowthField:
 
     @classmethod
     def make(cls, F, states, t, t_range) -> GrowthField:
-        """Validate ``F``, ``states``, ``t`` and ``t_range`` and build the field.
+        """Validate ``F``, ``states``, ``t`` and ``t_range`` and build the field; the same
+        arguments give the same field (kept: a growth bound and a Lipschitz or Hoelder bound of
+        one constant share its enclosures, radial profile and Lipschitz routes, each a
+        deterministic function of the field, computed once).
 
         Raises
         ------
@@ -77,6 +90,16 @@ class GrowthField:
             Repeated or missing states, a non-finite or reversed ``t_range``, or a symbol in
             ``F`` that is neither a state nor the time.
         """
+        try:
+            key = (sp.ImmutableMatrix(F), tuple(states), t, (float(t_range[0]), float(t_range[1])))
+            hash(key)
+        except (TypeError, ValueError, IndexError):  # not hashable: built and checked below
+            return cls._build(F, states, t, t_range)
+        return _make_kept(*key)
+
+    @classmethod
+    def _build(cls, F, states, t, t_range) -> GrowthField:
+        """:meth:`make`, not kept."""
         M = sp.Matrix(F)
         states = tuple(states)
         if len(set(states)) != len(states) or not states:
@@ -148,7 +171,7 @@ class GrowthField:
     def bounded_lipschitz(self) -> float | None:
         """Rigorous ``sup ||d vec F / da||_2`` from whole-space Jacobian enclosures, or ``None``."""
         if self._lip is False:
-            jac = [sp.diff(e, x) for e in self.entries for x in self.xs]
+            jac = [_diff(e, x) for e in self.entries for x in self.xs]
             if any(j.has(sp.DiracDelta) for j in jac):
                 self._lip = None
             else:
@@ -178,7 +201,7 @@ class GrowthField:
             )
         prof = self.radial_profile()
         if prof is not None:
-            der = [sp.diff(g, self.rho) for g in prof]
+            der = [_diff(g, self.rho) for g in prof]
             if not any(d.has(sp.DiracDelta) for d in der):
                 val, msg = self.radial_norm_sup(der)
                 if val < _INF:
@@ -268,6 +291,12 @@ class GrowthField:
 #: ``exp``, ``atan`` and fractional powers behind the enclose callback, so that
 #: ``exp(-inf) = 0`` and ``|atan| <= pi/2`` are used on infinite arguments, and so that a sum of
 #: squares whose outward-rounded lower end is a denormal below 0 stays in the domain of ``sqrt``
+@functools.lru_cache(maxsize=_FIELDS_KEPT)
+def _make_kept(F, states, t, t_range) -> GrowthField:
+    """:meth:`GrowthField.make` for hashable arguments, kept."""
+    return GrowthField._build(F, states, t, t_range)
+
+
 _ExpW = sp.Function("_growth_exp")
 _AtanW = sp.Function("_growth_atan")
 _RPowW = sp.Function("_growth_rpow")
